@@ -1,0 +1,265 @@
+"""The beam frame: nodes, elements and per-element section/material data.
+
+A :class:`Frame` is a struct of arrays. Elements join node ``i`` to node ``j``
+shifted by ``images[e] @ periods`` (periodic frames); for a non-periodic frame
+``periods`` has shape (0, 3) and every shift is zero.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+
+from .errors import InputError
+from .sections import section_properties
+
+
+def _per_element(value, m, name, dtype=float):
+    """Broadcast a scalar or (m,) array to a contiguous (m,) array, naming ``name`` on failure."""
+    if value is None:
+        raise InputError(f"parameter '{name}' is required")
+    arr = np.asarray(value, dtype=dtype)
+    if arr.ndim == 0:
+        return np.full(m, arr, dtype=dtype)
+    if arr.shape != (m,):
+        raise InputError(f"parameter '{name}' must be a scalar or have shape ({m},) (one per element), got {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def _first_bad(mask):
+    return int(np.flatnonzero(mask)[0])
+
+
+class Frame:
+    """A 3D frame of two-node beams.
+
+    Parameters
+    ----------
+    nodes : array (n, 3)
+        Node coordinates, mm.
+    elements : int array (m, 2)
+        Node indices of each element.
+    radius : float or array (m,)
+        Circular section radius, mm. Give ``semi_axes`` instead for ellipses.
+    E : float or array (m,)
+        Young's modulus, MPa.
+    nu : float or array (m,)
+        Poisson's ratio, in (-1, 0.5).
+    yarn : int array (m,), optional
+        Yarn id of each element (default 0). Used to name culprits in errors and by contact.
+    semi_axes : array (m, 2) or (2,), optional
+        Semi-axes (a along e2, b along e3) of elliptical sections, mm.
+    ref : array (m, 3) or (3,), optional
+        Reference vectors fixing the local e2 axis (e2 = part of ref normal to e1).
+        Default: global z, or global x for elements within ~25 degrees of z.
+    periods : array (k, 3), optional
+        Lattice vectors of a periodic frame (k = 1, 2 or 3), mm.
+    images : int array (m, k), optional
+        Image offsets: element e joins node i to node j + images[e] @ periods.
+    contact_radius : float or array (m,), optional
+        Radius for contact, mm; default the section radius (larger semi-axis).
+    prestrain : float or array (m,), optional
+        Initial axial shortening strain eps0: the element wants to be shorter by
+        eps0 (positive values pre-stress it in tension when its ends are held).
+    """
+
+    def __init__(self, nodes, elements, *, radius=None, E=None, nu=None, yarn=None,
+                 semi_axes=None, ref=None, periods=None, images=None,
+                 contact_radius=None, prestrain=None):
+        nodes = np.ascontiguousarray(np.asarray(nodes, dtype=float))
+        if nodes.ndim != 2 or nodes.shape[1] != 3:
+            raise InputError(f"nodes must have shape (n, 3), got {nodes.shape}")
+        bad = ~np.isfinite(nodes).all(axis=1)
+        if bad.any():
+            i = _first_bad(bad)
+            raise InputError(f"node {i} has a non-finite coordinate {nodes[i].tolist()} "
+                             f"({int(bad.sum())} such nodes)")
+        elements = np.asarray(elements)
+        if elements.ndim != 2 or elements.shape[1] != 2:
+            raise InputError(f"elements must have shape (m, 2), got {elements.shape}")
+        if elements.size and not np.issubdtype(elements.dtype, np.integer):
+            if not np.all(elements == np.round(elements)):
+                raise InputError("elements must hold integer node indices")
+        elements = np.ascontiguousarray(elements.astype(np.int64))
+        n, m = len(nodes), len(elements)
+        if m == 0:
+            raise InputError("a frame needs at least one element")
+        out = (elements < 0) | (elements >= n)
+        if out.any():
+            e = _first_bad(out.any(axis=1))
+            raise InputError(f"element {e} refers to node {elements[e].tolist()}, "
+                             f"outside 0..{n - 1}")
+        self.nodes = nodes
+        self.elements = elements
+
+        # periodicity
+        if periods is None:
+            periods = np.zeros((0, 3))
+        periods = np.ascontiguousarray(np.asarray(periods, dtype=float).reshape(-1, 3))
+        k = len(periods)
+        if k > 3:
+            raise InputError(f"periods: at most 3 lattice vectors, got {k}")
+        if not np.isfinite(periods).all():
+            raise InputError("periods: lattice vectors must be finite")
+        if k and np.linalg.matrix_rank(periods, tol=1e-9 * max(1.0, np.abs(periods).max())) < k:
+            raise InputError(f"periods: the {k} lattice vectors {periods.tolist()} are not linearly independent")
+        if images is None:
+            if k:
+                raise InputError("images: a periodic frame needs an (m, k) integer image offset per element")
+            images = np.zeros((m, 0), dtype=np.int64)
+        images = np.asarray(images)
+        if images.ndim == 1 and k == 1:
+            images = images[:, None]
+        if images.shape != (m, k):
+            raise InputError(f"images must have shape ({m}, {k}), got {images.shape}")
+        if images.size and not np.all(images == np.round(images)):
+            raise InputError("images must be integers")
+        self.periods = periods
+        self.images = np.ascontiguousarray(images.astype(np.int64))
+
+        # sections and materials
+        if semi_axes is not None:
+            sa = np.asarray(semi_axes, dtype=float)
+            if sa.shape == (2,):
+                sa = np.broadcast_to(sa, (m, 2))
+            if sa.shape != (m, 2):
+                raise InputError(f"semi_axes must have shape (2,) or ({m}, 2), got {sa.shape}")
+            self.a = np.ascontiguousarray(sa[:, 0])
+            self.b = np.ascontiguousarray(sa[:, 1])
+        else:
+            r = _per_element(radius, m, "radius")
+            self.a, self.b = r, r.copy()
+        self.E = _per_element(E, m, "E")
+        self.nu = _per_element(nu, m, "nu")
+        self.yarn = _per_element(0 if yarn is None else yarn, m, "yarn", dtype=np.int64)
+        self.contact_radius = (np.maximum(self.a, self.b) if contact_radius is None
+                               else _per_element(contact_radius, m, "contact_radius"))
+        self.prestrain = _per_element(0.0 if prestrain is None else prestrain, m, "prestrain")
+        for name, arr in (("radius", self.a), ("radius", self.b), ("E", self.E),
+                          ("contact_radius", self.contact_radius)):
+            bad = ~(np.isfinite(arr) & (arr > 0))
+            if bad.any():
+                e = _first_bad(bad)
+                raise InputError(f"{name} of element {e} (yarn {self.yarn[e]}) must be positive and finite, got {arr[e]}")
+        bad = ~((self.nu > -1.0) & (self.nu < 0.5))
+        if bad.any():
+            e = _first_bad(bad)
+            raise InputError(f"nu of element {e} (yarn {self.yarn[e]}) must lie in (-1, 0.5), got {self.nu[e]}")
+        if not np.isfinite(self.prestrain).all():
+            e = _first_bad(~np.isfinite(self.prestrain))
+            raise InputError(f"prestrain of element {e} is not finite")
+
+        # geometry checks
+        d = self.element_vectors
+        L = np.linalg.norm(d, axis=1)
+        scale = max(1.0, float(np.abs(nodes).max()) if n else 1.0)
+        bad = L <= 1e-12 * scale
+        if bad.any():
+            e = _first_bad(bad)
+            raise InputError(f"element {e} (yarn {self.yarn[e]}, nodes {elements[e].tolist()}) has zero length")
+        self._check_duplicates()
+
+        e1 = d / L[:, None]
+        if ref is None:
+            ref = np.zeros((m, 3))
+            ref[:, 2] = 1.0
+            near_z = np.abs(e1[:, 2]) > 0.9
+            ref[near_z] = (1.0, 0.0, 0.0)
+        ref = np.asarray(ref, dtype=float)
+        if ref.shape == (3,):
+            ref = np.broadcast_to(ref, (m, 3))
+        if ref.shape != (m, 3):
+            raise InputError(f"ref must have shape (3,) or ({m}, 3), got {ref.shape}")
+        e2 = ref - np.einsum("ij,ij->i", ref, e1)[:, None] * e1
+        n2 = np.linalg.norm(e2, axis=1)
+        rn = np.linalg.norm(ref, axis=1)
+        bad = ~(n2 > 1e-8 * np.maximum(rn, 1e-300))
+        if bad.any():
+            e = _first_bad(bad)
+            raise InputError(f"reference vector {ref[e].tolist()} of element {e} (yarn {self.yarn[e]}) "
+                             f"is parallel to the element (or zero)")
+        e2 /= n2[:, None]
+        e3 = np.cross(e1, e2)
+        self.length = np.ascontiguousarray(L)
+        # rotation matrices: rows e1, e2, e3 (global -> local)
+        self.R = np.ascontiguousarray(np.stack([e1, e2, e3], axis=1))
+        props = section_properties(self.a, self.b, self.nu)
+        self.A, self.Iy, self.Iz, self.J, self.k = (props[x] for x in ("A", "Iy", "Iz", "J", "k"))
+        self.G = self.E / (2.0 * (1.0 + self.nu))
+
+    # ------------------------------------------------------------------
+    def _check_duplicates(self):
+        el = self.elements
+        img = self.images
+        swap = el[:, 0] > el[:, 1]
+        lo = np.where(swap, el[:, 1], el[:, 0])
+        hi = np.where(swap, el[:, 0], el[:, 1])
+        img_c = np.where(swap[:, None], -img, img)
+        # a self-loop (i == i + image) reversed is the same strut with -image
+        # a self-loop (i -> i + image) read backwards is the same strut with -image:
+        # canonical sign makes the first non-zero image component positive
+        same = lo == hi
+        if same.any() and img.shape[1]:
+            first = np.zeros(len(el), dtype=np.int64)
+            for c in range(img.shape[1] - 1, -1, -1):
+                first = np.where(img_c[:, c] != 0, img_c[:, c], first)
+            flip = same & (first < 0)
+            img_c = np.where(flip[:, None], -img_c, img_c)
+        key = np.column_stack([lo, hi, img_c])
+        _, idx, inv, cnt = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
+        if (cnt > 1).any():
+            g = _first_bad(cnt > 1)
+            dup = np.flatnonzero(inv.ravel() == g)
+            raise InputError(f"elements {dup[0]} and {dup[1]} are duplicates: both join nodes "
+                             f"{el[dup[0]].tolist()} (yarn {self.yarn[dup[0]]})")
+
+    # ------------------------------------------------------------------
+    @property
+    def n_nodes(self) -> int:
+        return len(self.nodes)
+
+    @property
+    def n_elements(self) -> int:
+        return len(self.elements)
+
+    @property
+    def ndof(self) -> int:
+        return 6 * len(self.nodes)
+
+    @property
+    def dim_periodic(self) -> int:
+        """Number of lattice vectors k (0 for a non-periodic frame)."""
+        return len(self.periods)
+
+    @property
+    def shift(self) -> np.ndarray:
+        """(m, 3) offset added to the second node of each element, mm."""
+        return self.images @ self.periods if self.periods.size else np.zeros((len(self.elements), 3))
+
+    @property
+    def element_vectors(self) -> np.ndarray:
+        """(m, 3) vector from the first to the (shifted) second node, mm."""
+        return self.nodes[self.elements[:, 1]] + self.shift - self.nodes[self.elements[:, 0]]
+
+    @cached_property
+    def EA(self):
+        return self.E * self.A
+
+    def yarn_ids(self):
+        return np.unique(self.yarn)
+
+    def with_(self, **changes) -> "Frame":
+        """A copy with some constructor arguments replaced (e.g. ``prestrain=...``)."""
+        kw = dict(nodes=self.nodes, elements=self.elements, semi_axes=np.column_stack([self.a, self.b]),
+                  E=self.E, nu=self.nu, yarn=self.yarn, ref=self.R[:, 1], periods=self.periods,
+                  images=self.images, contact_radius=self.contact_radius, prestrain=self.prestrain)
+        kw.update(changes)
+        if "radius" in changes:
+            kw.pop("semi_axes")
+        return Frame(**kw)
+
+    def __repr__(self) -> str:
+        per = f", {self.dim_periodic}-periodic" if self.dim_periodic else ""
+        return (f"Frame({self.n_nodes} nodes, {self.n_elements} elements, "
+                f"{len(self.yarn_ids())} yarns{per})")

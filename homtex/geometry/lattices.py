@@ -1,0 +1,189 @@
+"""Strut lattices: unit cells, periodic cells, supercells and finite blocks.
+
+A :class:`LatticeCell` holds lattice vectors, the points of one cell and the
+struts between them (strut s joins point a to point b shifted by
+``images[s] @ basis``). :func:`lattice_frame` turns it into a beam
+:class:`~homtex.Frame`: periodic (with image offsets) or a finite block of
+``repeat`` cells, each strut split into ``elements_per_strut`` beams.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..frame import Frame
+
+
+@dataclass
+class LatticeCell:
+    """One periodic cell of a strut lattice (lengths in mm).
+
+    basis : (k, 3) lattice vectors; points : (p, 3); struts : (s, 2) point
+    indices; images : (s, k) integer offsets of each strut's second point.
+    """
+
+    name: str
+    basis: np.ndarray
+    points: np.ndarray
+    struts: np.ndarray
+    images: np.ndarray
+
+
+def neighbor_struts(basis, points, cutoff, rtol=1e-6):
+    """All point pairs (a, b + image) closer than ``cutoff`` (each strut once)."""
+    basis = np.asarray(basis, float)
+    k = len(basis)
+    pts = np.asarray(points, float)
+    struts, imgs = [], []
+    for img in itertools.product((-1, 0, 1), repeat=k):
+        img = np.array(img)
+        d = pts[None, :, :] + img @ basis - pts[:, None, :]
+        dist = np.linalg.norm(d, axis=2)
+        a, b = np.nonzero((dist < cutoff * (1 + rtol)) & (dist > 1e-12))
+        for ai, bi in zip(a, b):
+            # keep one direction: (a < b) or (a == b and first non-zero image > 0)
+            if ai < bi or (ai == bi and img[np.flatnonzero(img)[0]] > 0):
+                struts.append((ai, bi))
+                imgs.append(img)
+    return np.array(struts, dtype=np.int64), np.array(imgs, dtype=np.int64).reshape(-1, k)
+
+
+def simple_cubic(a: float = 1.0) -> LatticeCell:
+    """Simple cubic lattice of edge ``a``: one point, three struts."""
+    basis = a * np.eye(3)
+    return LatticeCell("simple_cubic", basis, np.zeros((1, 3)),
+                       np.zeros((3, 2), dtype=np.int64), np.eye(3, dtype=np.int64))
+
+
+def bcc(a: float = 1.0) -> LatticeCell:
+    """Body-centred cubic strut lattice: centre joined to the 8 corners."""
+    basis = a * np.eye(3)
+    pts = np.array([[0, 0, 0], [0.5, 0.5, 0.5]]) * a
+    s, im = neighbor_struts(basis, pts, np.sqrt(3) / 2 * a)
+    return LatticeCell("bcc", basis, pts, s, im)
+
+
+def octet(a: float = 1.0) -> LatticeCell:
+    """Octet truss: FCC points, each joined to its 12 nearest neighbours."""
+    basis = a * np.eye(3)
+    pts = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]]) * a
+    s, im = neighbor_struts(basis, pts, a / np.sqrt(2))
+    return LatticeCell("octet", basis, pts, s, im)
+
+
+def square(a: float = 1.0) -> LatticeCell:
+    """Square lattice in the x-y plane."""
+    return LatticeCell("square", a * np.eye(3)[:2], np.zeros((1, 3)),
+                       np.zeros((2, 2), dtype=np.int64), np.eye(2, dtype=np.int64))
+
+
+def triangular(a: float = 1.0) -> LatticeCell:
+    """Triangular lattice in the x-y plane (struts of length a)."""
+    basis = a * np.array([[1.0, 0, 0], [0.5, np.sqrt(3) / 2, 0]])
+    s = np.zeros((3, 2), dtype=np.int64)
+    return LatticeCell("triangular", basis, np.zeros((1, 3)), s,
+                       np.array([[1, 0], [0, 1], [-1, 1]], dtype=np.int64))
+
+
+def honeycomb(h: float = 1.0, l: float = 1.0, theta: float = 30.0) -> LatticeCell:
+    """Hexagonal honeycomb in the x-y plane (Gibson-Ashby / Masters-Evans geometry).
+
+    Vertical walls of length ``h`` along y, inclined walls of length ``l`` at
+    angle ``theta`` (degrees) to the x axis; theta < 0 gives the re-entrant
+    (auxetic) honeycomb. The regular honeycomb is h = l, theta = 30.
+    """
+    t = np.radians(theta)
+    if not (-90 < theta < 90) or theta == 0.0:
+        raise InputError(f"honeycomb: theta must be in (-90, 90) degrees and non-zero, got {theta}")
+    if h <= 0 or l <= 0:
+        raise InputError(f"honeycomb: wall lengths must be positive, got h={h}, l={l}")
+    if h + l * np.sin(t) <= 0:
+        raise InputError(f"honeycomb: h + l sin(theta) must be positive (cells would invert), "
+                         f"got h={h}, l={l}, theta={theta}")
+    c, s = l * np.cos(t), l * np.sin(t)
+    # point 0 at the bottom of a vertical wall, point 1 at its top
+    pts = np.array([[0.0, 0.0, 0.0], [0.0, h, 0.0]])
+    basis = np.array([[2 * c, 0.0, 0.0], [c, h + s, 0.0]])
+    struts = np.array([[0, 1], [1, 0], [1, 0]], dtype=np.int64)
+    # top of wall (0, h) to bottom of the walls at (+-c, h + s): images (0,1) and (-1,1)
+    images = np.array([[0, 0], [0, 1], [-1, 1]], dtype=np.int64)
+    return LatticeCell(f"honeycomb(h={h}, l={l}, theta={theta})", basis, pts, struts, images)
+
+
+GENERATORS = {"simple_cubic": simple_cubic, "bcc": bcc, "octet": octet,
+              "square": square, "triangular": triangular, "honeycomb": honeycomb}
+
+
+def _subdivide(x0, x1, a, b, img, nel, n_base):
+    """Split struts into nel elements: new interior nodes and the element list."""
+    s = len(a)
+    if nel == 1:
+        return np.zeros((0, 3)), np.column_stack([a, b]), img
+    t = np.arange(1, nel) / nel
+    interior = x0[:, None, :] + t[None, :, None] * (x1 - x0)[:, None, :]
+    ids = n_base + np.arange(s * (nel - 1)).reshape(s, nel - 1)
+    chain = np.concatenate([a[:, None], ids, b[:, None]], axis=1)
+    el = np.stack([chain[:, :-1], chain[:, 1:]], axis=2).reshape(-1, 2)
+    im = np.zeros((s, nel, img.shape[1]), dtype=np.int64)
+    im[:, -1] = img
+    return interior.reshape(-1, 3), el, im.reshape(-1, img.shape[1])
+
+
+def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_axes=None,
+                  elements_per_strut: int = 1, repeat=None, periodic: bool = True,
+                  **cell_args) -> Frame:
+    """A beam frame of a lattice.
+
+    Parameters
+    ----------
+    cell : LatticeCell or generator name ("simple_cubic", "bcc", "octet",
+        "square", "triangular", "honeycomb"); ``cell_args`` go to the generator.
+    radius, E, nu, semi_axes : section and material (see :class:`~homtex.Frame`).
+    elements_per_strut : beams per strut (resolution).
+    repeat : cells per lattice direction (default 1 each).
+    periodic : True: a periodic frame of the repeated cell (supercell);
+        False: a finite block, struts that leave the block dropped.
+    """
+    if isinstance(cell, str):
+        if cell not in GENERATORS:
+            raise InputError(f"unknown lattice {cell!r}; choose from {sorted(GENERATORS)}")
+        cell = GENERATORS[cell](**cell_args)
+    nel = int(elements_per_strut)
+    if nel < 1:
+        raise InputError(f"elements_per_strut must be >= 1, got {elements_per_strut}")
+    k = len(cell.basis)
+    reps = np.ones(k, dtype=np.int64) if repeat is None else np.asarray(repeat, dtype=np.int64).reshape(k)
+    if np.any(reps < 1):
+        raise InputError(f"repeat must be >= 1 per lattice direction, got {reps.tolist()}")
+    p = len(cell.points)
+    cells = np.array(list(itertools.product(*[range(r) for r in reps])), dtype=np.int64).reshape(-1, k)
+    strides = np.cumprod(np.concatenate([[1], reps[::-1][:-1]]))[::-1]  # row-major like product
+    nodes = (cells @ cell.basis)[:, None, :] + cell.points[None]
+    nodes = nodes.reshape(-1, 3)
+    c = np.repeat(cells, len(cell.struts), axis=0)
+    sa = np.tile(cell.struts[:, 0], len(cells))
+    sb = np.tile(cell.struts[:, 1], len(cells))
+    simg = np.tile(cell.images, (len(cells), 1))
+    target = c + simg
+    if periodic:
+        img = np.floor_divide(target, reps)
+        target = target - img * reps
+        keep = np.ones(len(c), dtype=bool)
+    else:
+        keep = np.all((target >= 0) & (target < reps), axis=1)
+        img = np.zeros_like(target)
+    a = (c @ strides) * p + sa
+    b = (target @ strides) * p + sb
+    a, b, img = a[keep], b[keep], img[keep]
+    x0 = nodes[a]
+    x1 = nodes[b] + img @ (cell.basis * reps[:, None])
+    inner, el, im = _subdivide(x0, x1, a, b, img, nel, len(nodes))
+    allnodes = np.vstack([nodes, inner])
+    kw = dict(radius=radius, E=E, nu=nu, semi_axes=semi_axes)
+    if periodic:
+        return Frame(allnodes, el, periods=cell.basis * reps[:, None], images=im, **kw)
+    return Frame(allnodes, el, **kw)

@@ -1,0 +1,95 @@
+"""Cross sections and materials of beam elements.
+
+All quantities in mm and MPa. A section is described per element by two
+semi-axes ``a`` (along the local e2 axis) and ``b`` (along e3); a circle has
+``a == b == radius``.
+
+Section properties (per element, arrays of shape (m,)):
+
+* ``A``  = pi a b                          area, mm^2
+* ``Iy`` = pi a b^3 / 4                    second moment about e2 (bending in the e1-e3 plane), mm^4
+* ``Iz`` = pi a^3 b / 4                    second moment about e3 (bending in the e1-e2 plane), mm^4
+* ``J``  = pi a^3 b^3 / (a^2 + b^2)         torsion constant (Saint-Venant, exact for the ellipse), mm^4
+* ``k``  = 6 (1 + nu) / (7 + 6 nu)          shear correction factor (Cowper 1966, circle; used for
+                                            the ellipse as well, an approximation there)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def shear_factor(nu):
+    """Cowper's shear correction factor of a solid circle, k = 6(1+nu)/(7+6nu)."""
+    nu = np.asarray(nu, dtype=float)
+    return 6.0 * (1.0 + nu) / (7.0 + 6.0 * nu)
+
+
+def section_properties(a, b, nu):
+    """Area and inertia of elliptical (a != b) or circular (a == b) sections.
+
+    Parameters
+    ----------
+    a, b : array (m,)
+        Semi-axes along local e2 and e3, mm.
+    nu : array (m,)
+        Poisson's ratio (for the shear correction factor).
+
+    Returns
+    -------
+    dict with A, Iy, Iz, J, k as (m,) float64 arrays.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    A = np.pi * a * b
+    Iy = np.pi * a * b**3 / 4.0
+    Iz = np.pi * a**3 * b / 4.0
+    J = np.pi * a**3 * b**3 / (a**2 + b**2)
+    k = shear_factor(nu) * np.ones_like(a)
+    return {"A": A, "Iy": Iy, "Iz": Iz, "J": J, "k": k}
+
+
+@dataclass(frozen=True)
+class YarnType:
+    """A yarn: section, elastic constants and contact radius.
+
+    Attributes
+    ----------
+    name : str
+    radius : float
+        Section radius, mm (circle) - or ``semi_axes=(a, b)`` for an ellipse.
+    E : float
+        Young's modulus, MPa.
+    nu : float
+        Poisson's ratio.
+    contact_radius : float or None
+        Radius used by contact, mm; defaults to the section radius (or the larger semi-axis).
+    semi_axes : tuple or None
+        (a, b) semi-axes of an elliptical section, mm.
+    source : str
+        Where the values come from (literature reference or "assumption").
+    """
+
+    name: str
+    radius: float
+    E: float
+    nu: float
+    contact_radius: float | None = None
+    semi_axes: tuple | None = None
+    source: str = ""
+
+    @property
+    def a(self) -> float:
+        return float(self.semi_axes[0]) if self.semi_axes else float(self.radius)
+
+    @property
+    def b(self) -> float:
+        return float(self.semi_axes[1]) if self.semi_axes else float(self.radius)
+
+    @property
+    def rc(self) -> float:
+        if self.contact_radius is not None:
+            return float(self.contact_radius)
+        return max(self.a, self.b)
