@@ -76,7 +76,7 @@ def rigid_body_modes(coords: np.ndarray, center=None) -> np.ndarray:
     B[:, 0, 4], B[:, 2, 4] = d[:, 2], -d[:, 0]
     B[:, 0, 5], B[:, 1, 5] = -d[:, 1], d[:, 0]
     for k in range(3):
-        B[:, 3 + k, 3 + k] = 1.0
+        B[:, 3 + k, 3 + k] = 1.0 / s   # theta = omega, consistent with the scaled lever arm
     return B.reshape(6 * n, 6)
 
 
@@ -254,8 +254,10 @@ class LinearSolver:
             msg = (f"{rep.method} did not converge: true relative residual {rep.residual:.3e} > "
                    f"tolerance {self.tol:.1e} after {rep.iterations} iterations")
             if len(h) > 50:
-                drop = h[-1] / max(h[-51], 1e-300)
-                msg += f"; stalled: the last 50 iterations reduced the residual by a factor of only {1 / drop:.3g}"
+                drop = h[-51] / max(h[-1], 1e-300)
+                msg += (f"; stalled: the last 50 iterations reduced the preconditioned residual "
+                        f"by a factor of only {drop:.3g}" if drop < 10 else
+                        f"; the residual still falls (x{drop:.3g} per 50 iterations): raise maxiter")
             raise SolverError(msg, history=h, report=rep)
         return x, rep
 
