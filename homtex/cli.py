@@ -1,0 +1,175 @@
+"""The ``homtex`` command: one subcommand per pipeline stage, each writing netCDF + PNG.
+
+    homtex run      [--out DIR]                 the main job (README's first command)
+    homtex cell     CELL [--out DIR]            summary and picture of a unit cell
+    homtex homogenize CELL [--out DIR]          effective stiffness of a periodic cell
+    homtex compress CELL [--strain 0.3] [--steps 20] [--out DIR]
+    homtex seam     CELL --distance D [--prestrain EPS] [--out DIR]
+    homtex macro    CELL [--distance D] [--scatter S] [--out DIR]
+    homtex study    STUDY.toml --out DIR [--scheduler ADDRESS]
+    homtex plot     FILE.nc [--out PNG]
+
+Errors from bad input (InputError) and failed solves (SolverError) are printed as one clear
+message and a non-zero exit status, never as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from .errors import InputError, SolverError
+
+
+def _out(args, default: str) -> Path:
+    out = Path(args.out or default)
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _say(msg: str) -> None:
+    print(msg, flush=True)
+
+
+def cmd_run(args) -> None:
+    from .jobs import main_job
+
+    t0 = time.perf_counter()
+    outputs = main_job(_out(args, "results"), quick=args.quick)
+    _say(f"\nmain job finished in {time.perf_counter() - t0:.1f} s; outputs:")
+    for name, path in outputs.items():
+        _say(f"  {name:<28s} {path}")
+
+
+def cmd_cell(args) -> None:
+    from .jobs import cell_summary
+
+    for name, path in cell_summary(args.cell, _out(args, "results/cell")).items():
+        _say(f"  {name:<20s} {path}")
+
+
+def cmd_homogenize(args) -> None:
+    from .jobs import homogenize_cell
+
+    ds, paths = homogenize_cell(args.cell, _out(args, "results/homogenize"), solver=args.solver)
+    _say(str(ds))
+    for p in paths:
+        _say(f"  wrote {p}")
+
+
+def cmd_compress(args) -> None:
+    from .jobs import compress_cell
+
+    ds, paths = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
+                              steps=args.steps)
+    _say(str(ds))
+    for p in paths:
+        _say(f"  wrote {p}")
+
+
+def cmd_seam(args) -> None:
+    from .jobs import seam_cell
+
+    ds, paths = seam_cell(args.cell, _out(args, "results/seam"), seam_distance=args.distance,
+                          prestrain=args.prestrain)
+    _say(f"cushion height {float(ds['cushion_height']):.2f} mm")
+    for p in paths:
+        _say(f"  wrote {p}")
+
+
+def cmd_macro(args) -> None:
+    from .jobs import macro_cell
+
+    ds, paths = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
+                           height_scatter=args.scatter, seed=args.seed)
+    _say(str(ds))
+    for p in paths:
+        _say(f"  wrote {p}")
+
+
+def cmd_study(args) -> None:
+    from .study import run_study
+
+    ds = run_study(args.study, args.out, scheduler=args.scheduler)
+    _say(str(ds))
+    _say(f"  wrote {Path(args.out) / 'result.nc'}")
+
+
+def cmd_plot(args) -> None:
+    from .jobs import plot_file
+
+    _say(f"  wrote {plot_file(args.file, args.out)}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="homtex", description=__doc__.split("\n")[0])
+    from . import __version__
+
+    p.add_argument("--version", action="version", version=f"homtex {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("run", help="the main job: the paper's study end to end")
+    s.add_argument("--out", help="output folder (default results/)")
+    s.add_argument("--quick", action="store_true", help="coarser, faster variant (for smoke tests)")
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("cell", help="summary and picture of a unit cell")
+    s.add_argument("cell")
+    s.add_argument("--out")
+    s.set_defaults(func=cmd_cell)
+
+    s = sub.add_parser("homogenize", help="effective stiffness of a periodic cell")
+    s.add_argument("cell")
+    s.add_argument("--solver", default="amg", choices=["amg", "direct", "cg"])
+    s.add_argument("--out")
+    s.set_defaults(func=cmd_homogenize)
+
+    s = sub.add_parser("compress", help="compression curve of a fabric cell between plates")
+    s.add_argument("cell")
+    s.add_argument("--strain", type=float, default=0.3)
+    s.add_argument("--steps", type=int, default=20)
+    s.add_argument("--out")
+    s.set_defaults(func=cmd_compress)
+
+    s = sub.add_parser("seam", help="cushion profile of a seam cell")
+    s.add_argument("cell")
+    s.add_argument("--distance", type=float, required=True, help="seam distance, mm")
+    s.add_argument("--prestrain", type=float, default=None, help="stitch-yarn pre-strain (default calibrated)")
+    s.add_argument("--out")
+    s.set_defaults(func=cmd_seam)
+
+    s = sub.add_parser("macro", help="force-compression curve of a seamed specimen (cushion layer)")
+    s.add_argument("cell")
+    s.add_argument("--distance", type=float, default=None, help="seam distance, mm (default: no seams)")
+    s.add_argument("--scatter", type=float, default=0.0, help="height scatter between cushions")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out")
+    s.set_defaults(func=cmd_macro)
+
+    s = sub.add_parser("study", help="run a parameter study (resumable)")
+    s.add_argument("study")
+    s.add_argument("--out", required=True)
+    s.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+    s.set_defaults(func=cmd_study)
+
+    s = sub.add_parser("plot", help="chart of a homtex netCDF file")
+    s.add_argument("file")
+    s.add_argument("--out", default=None)
+    s.set_defaults(func=cmd_plot)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        args.func(args)
+    except (InputError, SolverError, FileNotFoundError) as exc:
+        print(f"homtex {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

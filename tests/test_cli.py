@@ -1,0 +1,27 @@
+"""The homtex command: the main job's quick variant writes what it says, errors are clean."""
+
+import subprocess
+import sys
+
+import numpy as np
+import xarray as xr
+
+from homtex.cli import main
+
+
+def test_run_quick_writes_dataset_and_chart(tmp_path):
+    assert main(["run", "--quick", "--out", str(tmp_path)]) == 0
+    ds = xr.open_dataset(tmp_path / "lattice_demo.nc")
+    assert (tmp_path / "lattice_demo.png").stat().st_size > 10_000
+    assert float(ds["force"]) > 0                      # compression resisted
+    assert float(ds["max_difference"].max()) < 1e-7    # amg, direct and cg agree
+    for v in ds.data_vars.values():
+        assert "units" in v.attrs and "long_name" in v.attrs
+    ds.close()
+
+
+def test_bad_input_is_a_message_not_a_traceback(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "homtex.cli", "seam", str(tmp_path / "missing.toml"),
+                        "--distance", "24"], capture_output=True, text=True)
+    assert p.returncode == 2
+    assert "Traceback" not in p.stderr and "error" in p.stderr
