@@ -84,10 +84,17 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
 
     plt = _plt()
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.5))
-    xm = 0.5 * (f.nodes[f.elements[:, 0]] + f.nodes[f.elements[:, 1]] - f.shift * 0)
-    sc = ax[0].scatter(xm[:, 0], xm[:, 2], c=r.axial_force, s=2, cmap="coolwarm")
-    fig.colorbar(sc, ax=ax[0], label="axial force, N")
-    ax[0].set(xlabel="x, mm", ylabel="z, mm", title=f"octet block, {f.ndof} DOF: axial force")
+    from matplotlib.collections import LineCollection
+
+    seg = np.stack([f.nodes[f.elements[:, 0]][:, [0, 2]], f.nodes[f.elements[:, 1]][:, [0, 2]]], axis=1)
+    lim = np.abs(r.axial_force).max()
+    lc = LineCollection(seg, array=r.axial_force, cmap="coolwarm", linewidths=0.6)
+    lc.set_clim(-lim, lim)
+    ax[0].add_collection(lc)
+    ax[0].autoscale()
+    ax[0].set_aspect("equal")
+    fig.colorbar(lc, ax=ax[0], label="axial force, N")
+    ax[0].set(xlabel="x, mm", ylabel="z, mm", title=f"octet block, {f.ndof} DOF: axial force (side view)")
     names = list(results)
     ax[1].bar(names, [p.setup_seconds + p.solve_seconds for p in reps])
     for i, p in enumerate(reps):
