@@ -118,13 +118,22 @@ GENERATORS = {"simple_cubic": simple_cubic, "bcc": bcc, "octet": octet,
               "square": square, "triangular": triangular, "honeycomb": honeycomb}
 
 
-def _subdivide(x0, x1, a, b, img, nel, n_base):
-    """Split struts into nel elements: new interior nodes and the element list."""
+def _subdivide(x0, x1, a, b, img, nel, n_base, waviness=0.0, normal=None):
+    """Split struts into nel elements: new interior nodes and the element list.
+
+    With ``waviness`` w != 0 the interior nodes lie on the half-sine arc
+    x(t) = x0 + t (x1 - x0) + w L sin(pi t) n (L the strut length, n the unit
+    ``normal`` (s, 3) of each strut), so the strut is curved and the straight beams
+    are chords of it.
+    """
     s = len(a)
     if nel == 1:
         return np.zeros((0, 3)), np.column_stack([a, b]), img
     t = np.arange(1, nel) / nel
     interior = x0[:, None, :] + t[None, :, None] * (x1 - x0)[:, None, :]
+    if waviness:
+        L = np.linalg.norm(x1 - x0, axis=1)
+        interior += (waviness * L)[:, None, None] * np.sin(np.pi * t)[None, :, None] * normal[:, None, :]
     ids = n_base + np.arange(s * (nel - 1)).reshape(s, nel - 1)
     chain = np.concatenate([a[:, None], ids, b[:, None]], axis=1)
     el = np.stack([chain[:, :-1], chain[:, 1:]], axis=2).reshape(-1, 2)
@@ -133,9 +142,20 @@ def _subdivide(x0, x1, a, b, img, nel, n_base):
     return interior.reshape(-1, 3), el, im.reshape(-1, img.shape[1])
 
 
+def strut_normals(d: np.ndarray) -> np.ndarray:
+    """(s, 3) unit normals of strut directions d (s, 3): z x e1 (in the x-y plane for planar
+    struts), or x x e1 for struts within ~25 degrees of z."""
+    e1 = d / np.linalg.norm(d, axis=1)[:, None]
+    ref = np.zeros_like(e1)
+    ref[:, 2] = 1.0
+    ref[np.abs(e1[:, 2]) > 0.9] = (1.0, 0.0, 0.0)
+    n = np.cross(ref, e1)
+    return n / np.linalg.norm(n, axis=1)[:, None]
+
+
 def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_axes=None,
                   elements_per_strut: int = 1, repeat=None, periodic: bool = True,
-                  **cell_args) -> Frame:
+                  waviness: float = 0.0, contact_radius=None, **cell_args) -> Frame:
     """A beam frame of a lattice.
 
     Parameters
@@ -147,6 +167,11 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
     repeat : cells per lattice direction (default 1 each).
     periodic : True: a periodic frame of the repeated cell (supercell);
         False: a finite block, struts that leave the block dropped.
+    waviness : amplitude of a half-sine bow of every strut, as a fraction of its length
+        (0: straight struts). The bow lies along :func:`strut_normals` (in the x-y plane
+        for planar lattices); the beams are chords of the curved strut, so a wavy
+        lattice converges with ``elements_per_strut`` (a straight one is exact at 1).
+    contact_radius : contact radius of the struts, mm (default: the section radius).
     """
     if isinstance(cell, str):
         if cell not in GENERATORS:
@@ -181,9 +206,125 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
     a, b, img = a[keep], b[keep], img[keep]
     x0 = nodes[a]
     x1 = nodes[b] + img @ (cell.basis * reps[:, None])
-    inner, el, im = _subdivide(x0, x1, a, b, img, nel, len(nodes))
+    waviness = float(waviness)
+    if not np.isfinite(waviness):
+        raise InputError(f"waviness must be finite, got {waviness}")
+    normal = strut_normals(x1 - x0) if waviness else None
+    inner, el, im = _subdivide(x0, x1, a, b, img, nel, len(nodes), waviness, normal)
     allnodes = np.vstack([nodes, inner])
-    kw = dict(radius=radius, E=E, nu=nu, semi_axes=semi_axes)
+    kw = dict(radius=radius, E=E, nu=nu, semi_axes=semi_axes, contact_radius=contact_radius)
     if periodic:
         return Frame(allnodes, el, periods=cell.basis * reps[:, None], images=im, **kw)
     return Frame(allnodes, el, **kw)
+
+
+# ----------------------------------------------------------------------------------
+# cell-file builders (see homtex.cells): build(parameters, yarns, resolution) -> (Frame, info)
+_COMMON = ("repeat", "yarn", "waviness")
+
+
+def _pick_yarn(parameters, yarns, table="parameters"):
+    from ..cells import CellError, get_str
+
+    if "yarn" in parameters:
+        name = get_str(parameters, "yarn", table)
+        if name not in yarns:
+            raise CellError(f"no yarn type {name!r}; the file defines {sorted(yarns)}",
+                            table=table, key="yarn")
+        return yarns[name]
+    if len(yarns) != 1:
+        raise CellError(f"the file defines yarns {sorted(yarns)}: name the one the struts use",
+                        table=table, key="yarn")
+    return next(iter(yarns.values()))
+
+
+def _build(cell: LatticeCell, parameters, yarns, resolution, table="parameters"):
+    from ..cells import CellError, check_keys, get_int, get_list, get_number
+
+    y = _pick_yarn(parameters, yarns, table)
+    check_keys(resolution, ("elements_per_strut",), "resolution")
+    nel = get_int(resolution, "elements_per_strut", "resolution", default=1, ge=1)
+    k = len(cell.basis)
+    repeat = get_list(parameters, "repeat", table, shape=(k,), integer=True, default=np.ones(k, int))
+    if np.any(repeat < 1):
+        raise CellError(f"entries must be >= 1, got {repeat.tolist()}", table=table, key="repeat")
+    wav = get_number(parameters, "waviness", table, default=0.0, ge=-0.5, le=0.5)
+    sec = dict(semi_axes=(y.a, y.b)) if y.semi_axes else dict(radius=y.radius)
+    frame = lattice_frame(cell, E=y.E, nu=y.nu, contact_radius=y.rc, elements_per_strut=nel,
+                          repeat=repeat, waviness=wav, **sec)
+    info = {"lattice": cell.name, "groups": {"struts": np.ones(frame.n_elements, dtype=bool)}}
+    return frame, info
+
+
+def build_honeycomb(parameters: dict, yarns: dict, resolution: dict):
+    """Hexagonal honeycomb (regular or re-entrant) from a cell file.
+
+    [parameters]: h, l (mm, > 0), theta (degrees, in (-90, 90), non-zero; < 0 re-entrant),
+    optional repeat = [nx, ny], yarn, waviness. [resolution]: elements_per_strut.
+    """
+    from ..cells import CellError, check_keys, get_number
+
+    t = "parameters"
+    check_keys(parameters, ("h", "l", "theta", *_COMMON), t)
+    h = get_number(parameters, "h", t, gt=0)
+    l_ = get_number(parameters, "l", t, gt=0)
+    theta = get_number(parameters, "theta", t, gt=-90, lt=90)
+    if theta == 0:
+        raise CellError("must be non-zero (theta = 0 collapses the cell: the lattice vectors are "
+                        "not independent)", table=t, key="theta")
+    if h + l_ * np.sin(np.radians(theta)) <= 1e-9 * max(h, l_):
+        raise CellError(f"h + l sin(theta) = {h + l_ * np.sin(np.radians(theta)):g} must be > 0 "
+                        f"(otherwise the lattice vectors are not independent)", table=t, key="theta")
+    return _build(honeycomb(h, l_, theta), parameters, yarns, resolution)
+
+
+def _spacing_builder(gen, doc):
+    def build(parameters: dict, yarns: dict, resolution: dict):
+        from ..cells import check_keys, get_number
+
+        check_keys(parameters, ("a", *_COMMON), "parameters")
+        a = get_number(parameters, "a", "parameters", gt=0)
+        return _build(gen(a), parameters, yarns, resolution)
+    build.__doc__ = (f"{doc} from a cell file. [parameters]: a (strut spacing, mm), optional "
+                     f"repeat, yarn, waviness. [resolution]: elements_per_strut.")
+    build.__name__ = f"build_{gen.__name__}"
+    return build
+
+
+build_square = _spacing_builder(square, "Square lattice")
+build_triangular = _spacing_builder(triangular, "Triangular lattice")
+build_simple_cubic = _spacing_builder(simple_cubic, "Simple cubic lattice")
+build_bcc = _spacing_builder(bcc, "BCC lattice")
+build_octet = _spacing_builder(octet, "Octet truss")
+
+
+def build_lattice(parameters: dict, yarns: dict, resolution: dict):
+    """An explicit strut lattice from a cell file.
+
+    [parameters]: basis (k x 3 lattice vectors, mm), points (p x 3, mm), struts (s x 2 point
+    indices), images (s x k integer offsets of each strut's second point), optional repeat,
+    yarn, waviness. [resolution]: elements_per_strut.
+    """
+    from ..cells import CellError, check_keys, get_list
+
+    t = "parameters"
+    check_keys(parameters, ("basis", "points", "struts", "images", *_COMMON), t)
+    basis = get_list(parameters, "basis", t, shape=(None, 3))
+    k = len(basis)
+    if not 1 <= k <= 3:
+        raise CellError(f"must hold 1 to 3 lattice vectors, got {k}", table=t, key="basis")
+    if np.linalg.matrix_rank(basis, tol=1e-9 * max(1.0, np.abs(basis).max())) < k:
+        raise CellError(f"the lattice vectors {basis.tolist()} are not linearly independent",
+                        table=t, key="basis")
+    points = get_list(parameters, "points", t, shape=(None, 3))
+    struts = get_list(parameters, "struts", t, shape=(None, 2), integer=True)
+    images = get_list(parameters, "images", t, shape=(len(struts), k), integer=True)
+    if len(points) == 0 or len(struts) == 0:
+        raise CellError("a lattice needs at least one point and one strut", table=t,
+                        key="points" if len(points) == 0 else "struts")
+    bad = (struts < 0) | (struts >= len(points))
+    if bad.any():
+        s = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise CellError(f"strut {s} refers to point {struts[s].tolist()}, outside 0..{len(points) - 1}",
+                        table=t, key="struts")
+    return _build(LatticeCell("lattice", basis, points, struts, images), parameters, yarns, resolution)

@@ -1,0 +1,450 @@
+"""Unit-cell files: ``cells/*.toml`` -> :class:`Cell` -> :class:`~homtex.Frame`.
+
+A cell file is TOML data (read with tomllib / tomli); nothing in it is executed.
+Schema::
+
+    [cell]
+    name = "..."
+    generator = "honeycomb"        # key into cells.GENERATORS
+    description = "..."            # optional
+    [parameters]                   # generator-specific (may contain nested tables)
+    ...
+    [yarns.<name>]                 # one table per yarn type -> homtex.YarnType
+    section = "circle"             # or "ellipse"
+    radius = 0.1                   # circle (mm)  | semi_axes = [a, b] for an ellipse (mm)
+    E = 3000.0                     # MPa
+    nu = 0.3
+    contact_radius = 0.1           # optional, mm
+    source = "where the numbers come from"
+    [resolution]
+    elements_per_strut = 4         # generator-specific keys
+
+A generator is a function ``build(parameters, yarns, resolution) -> Frame`` or
+``-> (Frame, info)`` named in :data:`GENERATORS` as ``"module:function"`` (imported
+on first use). ``info`` may carry ``"groups"`` ({name: (m,) bool element mask}) and
+other data (e.g. ``"thickness"`` in mm). Builders report bad values with
+:class:`CellError` (``table`` and ``key``); :func:`load_cell` adds the file.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from importlib import import_module
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .frame import Frame
+from .sections import YarnType
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - python 3.10
+    import tomli as tomllib  # type: ignore
+
+__all__ = ["GENERATORS", "Cell", "CellError", "load_cell", "get_number", "get_int", "get_str",
+           "get_list", "check_keys"]
+
+#: generator name -> "module:function" (imported lazily)
+GENERATORS: dict[str, str] = {
+    "honeycomb": "homtex.geometry.lattices:build_honeycomb",
+    "square": "homtex.geometry.lattices:build_square",
+    "triangular": "homtex.geometry.lattices:build_triangular",
+    "simple_cubic": "homtex.geometry.lattices:build_simple_cubic",
+    "bcc": "homtex.geometry.lattices:build_bcc",
+    "octet": "homtex.geometry.lattices:build_octet",
+    "lattice": "homtex.geometry.lattices:build_lattice",
+    "spacer": "homtex.geometry.spacer:build_cell",
+}
+
+TABLES = ("cell", "parameters", "yarns", "resolution")
+CELL_KEYS = ("name", "generator", "description")
+YARN_KEYS = ("section", "radius", "semi_axes", "E", "nu", "contact_radius", "source")
+
+
+class CellError(InputError):
+    """A bad cell file or cell parameter, naming the file, table and key.
+
+    ``str(err)`` reads ``cells/x.toml: [yarns.pile] key 'radius': must be > 0, got -0.1``.
+    """
+
+    def __init__(self, message: str, *, file=None, table: str | None = None, key: str | None = None):
+        super().__init__(message)
+        self.message = message
+        self.file = None if file is None else str(file)
+        self.table = table
+        self.key = key
+
+    def __str__(self) -> str:
+        parts = []
+        if self.file:
+            parts.append(f"{self.file}:")
+        if self.table:
+            parts.append(f"[{self.table}]")
+        if self.key:
+            parts.append(f"key '{self.key}':")
+        elif self.table:
+            parts[-1] += ":"
+        parts.append(self.message)
+        return " ".join(parts)
+
+
+# ----------------------------------------------------------------------------------
+# validation helpers (also for generators written elsewhere)
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _tname(v) -> str:
+    return {str: "a string", bool: "a boolean", int: "an integer", float: "a number",
+            list: "an array", dict: "a table"}.get(type(v), type(v).__name__)
+
+
+def get_number(d: dict, key: str, table: str, *, default=None, gt=None, ge=None, lt=None,
+               le=None, required: bool = True) -> float | None:
+    """A finite number d[key] with optional bounds, else CellError(table, key)."""
+    if key not in d:
+        if default is not None or not required:
+            return default
+        raise CellError("missing key (a number)", table=table, key=key)
+    v = d[key]
+    if not _is_number(v):
+        raise CellError(f"must be a number, got {_tname(v)} {v!r}", table=table, key=key)
+    v = float(v)
+    if not math.isfinite(v):
+        raise CellError(f"must be finite, got {v}", table=table, key=key)
+    for bound, op, ok in ((gt, ">", lambda x, b: x > b), (ge, ">=", lambda x, b: x >= b),
+                          (lt, "<", lambda x, b: x < b), (le, "<=", lambda x, b: x <= b)):
+        if bound is not None and not ok(v, bound):
+            raise CellError(f"must be {op} {bound}, got {v:g}", table=table, key=key)
+    return v
+
+
+def get_int(d: dict, key: str, table: str, *, default=None, ge=None) -> int | None:
+    """An integer d[key] (>= ge), else CellError(table, key)."""
+    if key not in d:
+        if default is not None:
+            return default
+        raise CellError("missing key (an integer)", table=table, key=key)
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise CellError(f"must be an integer, got {_tname(v)} {v!r}", table=table, key=key)
+    if ge is not None and v < ge:
+        raise CellError(f"must be >= {ge}, got {v}", table=table, key=key)
+    return int(v)
+
+
+def get_str(d: dict, key: str, table: str, *, default=None, choices=None) -> str | None:
+    """A non-empty string d[key] (one of ``choices``), else CellError(table, key)."""
+    if key not in d:
+        if default is not None:
+            return default
+        raise CellError("missing key (a string)", table=table, key=key)
+    v = d[key]
+    if not isinstance(v, str):
+        raise CellError(f"must be a string, got {_tname(v)} {v!r}", table=table, key=key)
+    if choices is not None and v not in choices:
+        raise CellError(f"must be one of {list(choices)}, got {v!r}", table=table, key=key)
+    if choices is None and not v.strip() and default is None:
+        raise CellError("must not be empty", table=table, key=key)
+    return v
+
+
+def get_list(d: dict, key: str, table: str, *, shape=None, integer: bool = False, default=None,
+             gt=None) -> np.ndarray | None:
+    """A numeric array d[key] of the given shape (None entries: any size)."""
+    if key not in d:
+        if default is not None:
+            return np.asarray(default)
+        raise CellError("missing key (an array)", table=table, key=key)
+    v = d[key]
+    if not isinstance(v, list):
+        raise CellError(f"must be an array, got {_tname(v)} {v!r}", table=table, key=key)
+    flat = list(_flatten(v))
+    kind = "integers" if integer else "numbers"
+    if not all((isinstance(x, int) and not isinstance(x, bool)) if integer else _is_number(x) for x in flat):
+        raise CellError(f"must be an array of {kind}, got {v!r}", table=table, key=key)
+    try:
+        arr = np.asarray(v, dtype=np.int64 if integer else float)
+    except ValueError:
+        raise CellError(f"must be a rectangular array of {kind}, got {v!r}", table=table, key=key) from None
+    if shape is not None:
+        ok = arr.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, arr.shape))
+        if not ok:
+            want = "x".join("n" if s is None else str(s) for s in shape)
+            raise CellError(f"must have shape {want}, got {list(arr.shape)}", table=table, key=key)
+    if not integer and not np.isfinite(arr).all():
+        raise CellError(f"must be finite, got {v!r}", table=table, key=key)
+    if gt is not None and arr.size and not (arr > gt).all():
+        raise CellError(f"entries must be > {gt}, got {v!r}", table=table, key=key)
+    return arr
+
+
+def _flatten(v):
+    for x in v:
+        if isinstance(x, list):
+            yield from _flatten(x)
+        else:
+            yield x
+
+
+def check_keys(d: dict, allowed, table: str) -> None:
+    """CellError for the first key of d not in ``allowed``."""
+    for key in d:
+        if key not in allowed:
+            raise CellError(f"unknown key; allowed keys are {sorted(allowed)}", table=table, key=key)
+
+
+def _table(d, key, table, required=True):
+    if key not in d:
+        if required:
+            raise CellError(f"missing table [{key}]" if not table else "missing table",
+                            table=table or None, key=key if table else None)
+        return {}
+    v = d[key]
+    if not isinstance(v, dict):
+        name = f"{table}.{key}" if table else key
+        raise CellError(f"must be a table, got {_tname(v)} {v!r}", table=name)
+    return v
+
+
+def _yarn(name: str, d: dict) -> YarnType:
+    table = f"yarns.{name}"
+    if not isinstance(d, dict):
+        raise CellError(f"must be a table, got {_tname(d)} {d!r}", table=table)
+    check_keys(d, YARN_KEYS, table)
+    section = get_str(d, "section", table, choices=("circle", "ellipse"))
+    if section == "circle":
+        if "semi_axes" in d:
+            raise CellError("a circle has 'radius', not 'semi_axes' (or set section = \"ellipse\")",
+                            table=table, key="semi_axes")
+        radius = get_number(d, "radius", table, gt=0)
+        semi = None
+    else:
+        if "radius" in d:
+            raise CellError("an ellipse has 'semi_axes' = [a, b], not 'radius' (or set section = \"circle\")",
+                            table=table, key="radius")
+        semi = get_list(d, "semi_axes", table, shape=(2,), gt=0)
+        semi = (float(semi[0]), float(semi[1]))
+        radius = max(semi)
+    E = get_number(d, "E", table, gt=0)
+    nu = get_number(d, "nu", table, gt=-1.0, lt=0.5)
+    rc = get_number(d, "contact_radius", table, gt=0, required=False)
+    source = get_str(d, "source", table)
+    return YarnType(name=name, radius=float(radius), E=E, nu=nu, contact_radius=rc,
+                    semi_axes=semi, source=source)
+
+
+def _resolve(generator: str, file):
+    if generator not in GENERATORS:
+        raise CellError(f"unknown generator {generator!r}; choose from {sorted(GENERATORS)}",
+                        file=file, table="cell", key="generator")
+    target = GENERATORS[generator]
+    mod, _, fn = target.partition(":")
+    try:
+        return getattr(import_module(mod), fn)
+    except (ImportError, AttributeError) as exc:
+        raise CellError(f"generator {generator!r} ({target}) is not available: {exc}",
+                        file=file, table="cell", key="generator") from exc
+
+
+# ----------------------------------------------------------------------------------
+class Cell:
+    """A validated unit cell: its generator, parameters, yarn types and resolution.
+
+    Attributes
+    ----------
+    path : str or None; name, generator, description : str
+    parameters : dict (generator-specific, nested tables as dicts)
+    yarns : dict name -> YarnType
+    resolution : dict
+    frame : Frame, built by the generator on first access and cached
+    groups : dict name -> (m,) bool element mask (from the generator, may be empty)
+    info : dict of further generator output (e.g. "thickness", mm)
+    """
+
+    def __init__(self, data: dict, path=None):
+        self.path = None if path is None else str(path)
+        f = self.path
+        try:
+            if not isinstance(data, dict):
+                raise CellError("a cell file must be a TOML document")
+            for key in data:
+                if key not in TABLES:
+                    raise CellError(f"unknown table [{key}]; a cell file has [cell], [parameters], "
+                                    f"[yarns.<name>] and [resolution]", table=key)
+            cell = _table(data, "cell", "")
+            check_keys(cell, CELL_KEYS, "cell")
+            self.name = get_str(cell, "name", "cell")
+            self.generator = get_str(cell, "generator", "cell")
+            self.description = get_str(cell, "description", "cell", default="")
+            self.parameters = copy.deepcopy(_table(data, "parameters", "", required=False))
+            yarns = _table(data, "yarns", "")
+            if not yarns:
+                raise CellError("at least one [yarns.<name>] table is required", table="yarns")
+            self.yarns = {name: _yarn(name, d) for name, d in yarns.items()}
+            self.resolution = copy.deepcopy(_table(data, "resolution", "", required=False))
+        except CellError as err:
+            err.file = err.file or f
+            raise
+        self._builder = _resolve(self.generator, f)
+        self._data = copy.deepcopy(data)
+        self._frame = None
+        self._info: dict = {}
+
+    # ------------------------------------------------------------------
+    def build(self) -> Frame:
+        """Run the generator (once) and return the frame."""
+        if self._frame is not None:
+            return self._frame
+        f = self.path
+        try:
+            out = self._builder(copy.deepcopy(self.parameters), dict(self.yarns),
+                                copy.deepcopy(self.resolution))
+        except CellError as err:
+            err.file = err.file or f
+            raise
+        except InputError as err:
+            raise CellError(f"building the frame failed: {err}", file=f, table="parameters") from err
+        info = {}
+        if isinstance(out, tuple):
+            if len(out) != 2 or not isinstance(out[1], dict):
+                raise CellError(f"generator {self.generator!r} must return a Frame or (Frame, dict)",
+                                file=f, table="cell", key="generator")
+            out, info = out
+        if not isinstance(out, Frame):
+            raise CellError(f"generator {self.generator!r} returned {type(out).__name__}, not a Frame",
+                            file=f, table="cell", key="generator")
+        groups = info.get("groups", {}) or {}
+        for gname, gmask in groups.items():
+            gm = np.asarray(gmask)
+            if gm.shape != (out.n_elements,) or gm.dtype != bool:
+                raise CellError(f"generator {self.generator!r}: group {gname!r} must be a "
+                                f"({out.n_elements},) bool mask, got {gm.dtype} {gm.shape}",
+                                file=f, table="cell", key="generator")
+        self._info = dict(info)
+        self._info["groups"] = {k: np.asarray(v) for k, v in groups.items()}
+        self._frame = out
+        return out
+
+    @property
+    def frame(self) -> Frame:
+        return self.build()
+
+    @property
+    def info(self) -> dict:
+        self.build()
+        return self._info
+
+    @property
+    def groups(self) -> dict:
+        return self.info["groups"]
+
+    # ------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """The cell's data as nested dicts (as read from the file, with replacements)."""
+        return copy.deepcopy(self._data)
+
+    def attrs(self) -> dict:
+        """Flat {dotted key: str | float | int} of the cell (for xarray/netCDF attributes).
+
+        Arrays are written as JSON strings, booleans as 0/1.
+        """
+        out = {"cell.path": self.path or ""}
+
+        def walk(prefix, d):
+            for k, v in d.items():
+                key = f"{prefix}.{k}" if prefix else k
+                if isinstance(v, dict):
+                    walk(key, v)
+                elif isinstance(v, bool):
+                    out[key] = int(v)
+                elif isinstance(v, (int, float, str)):
+                    out[key] = v
+                else:
+                    out[key] = json.dumps(v)
+        walk("", self._data)
+        return out
+
+    def replace(self, **dotted) -> "Cell":
+        """A new Cell with values changed by dotted keys, validated like a file.
+
+        >>> cell.replace(**{"yarns.pile.radius": 0.1, "resolution.elements_per_strut": 2})
+
+        A value of None removes the key. The frame of the new cell is built at once,
+        so bad values raise CellError here.
+        """
+        data = copy.deepcopy(self._data)
+        for dk, value in dotted.items():
+            parts = dk.split(".")
+            if len(parts) < 2 or parts[0] not in TABLES:
+                raise CellError(f"replace: key {dk!r} must be 'table.key' with table one of {list(TABLES)}",
+                                file=self.path, table=parts[0] if parts else None)
+            d = data
+            for i, p in enumerate(parts[:-1]):
+                if p not in d:
+                    if i == 0 and p in ("parameters", "resolution"):
+                        d[p] = {}
+                    else:
+                        raise CellError(f"replace: no table [{'.'.join(parts[:i + 1])}]",
+                                        file=self.path, table=".".join(parts[:i]) or None, key=p)
+                d = d[p]
+                if not isinstance(d, dict):
+                    raise CellError(f"replace: [{'.'.join(parts[:i + 1])}] is not a table",
+                                    file=self.path, table=".".join(parts[:i + 1]))
+            if value is None:
+                d.pop(parts[-1], None)
+            else:
+                d[parts[-1]] = _plain(value)
+        new = Cell(data, self.path)
+        new.build()
+        return new
+
+    def __repr__(self) -> str:
+        return (f"Cell({self.name!r}, generator={self.generator!r}, yarns={sorted(self.yarns)}, "
+                f"path={self.path!r})")
+
+
+def _plain(v):
+    """numpy scalars/arrays to plain Python (what TOML would give)."""
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    return v
+
+
+def load_cell(path, *, build: bool = True) -> Cell:
+    """Read, validate and (by default) build a cell file.
+
+    Parameters
+    ----------
+    path : str or Path of a ``.toml`` cell file.
+    build : build the frame at once (default), so every error shows here.
+
+    Raises
+    ------
+    CellError (an InputError) naming the file, table and key of the culprit.
+    """
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise CellError("no such file", file=path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CellError(f"cannot read: {exc}", file=path) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CellError(f"not valid TOML: {exc}", file=path) from None
+    cell = Cell(data, path)
+    if build:
+        cell.build()
+    return cell
