@@ -124,7 +124,37 @@ def cell_summary(path, out: Path) -> dict:
 
 
 def homogenize_cell(path, out: Path, *, solver="amg"):
-    raise InputError("not available yet")
+    """Effective stiffness of a periodic cell file: netCDF + a PNG of C and the constants.
+
+    Returns (Dataset, [paths]).
+    """
+    from .cells import load_cell
+    from .periodic import homogenize
+
+    cell = load_cell(path)
+    res = homogenize(cell.frame, solver=solver)
+    ds = res.to_dataset()
+    ds.attrs.update({f"cell_{k}": v for k, v in cell.attrs().items()})
+    _attrs(ds, title=f"effective stiffness of {cell.name}")
+    out = Path(out)
+    nc = _save(ds, out / f"{cell.name}_homogenized.nc")
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    C = res.C
+    im = ax.imshow(C, cmap="viridis")
+    for (i, j), v in np.ndenumerate(C):
+        ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7, color="w")
+    ax.set_xticks(range(len(res.components)), res.components)
+    ax.set_yticks(range(len(res.components)), res.components)
+    fig.colorbar(im, ax=ax, label=res.units)
+    consts = ", ".join(f"{k}={v:.3g}" for k, v in res.engineering_constants().items())
+    ax.set_title(f"{cell.name}: C ({res.units})\n{consts}", fontsize=8)
+    fig.tight_layout()
+    png = out / f"{cell.name}_homogenized.png"
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return ds, [nc, png]
 
 
 def compress_cell(path, out: Path, *, strain=0.3, steps=20):
@@ -140,4 +170,33 @@ def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=
 
 
 def plot_file(path, out=None) -> Path:
-    raise InputError("not available yet")
+    """A chart of any homtex netCDF file: every 1-D variable against its dimension
+    (one panel per dimension, variables with the same units share an axis)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no such file: {path}")
+    with xr.open_dataset(path) as ds:
+        ds = ds.load()
+    groups: dict = {}
+    for name, v in ds.data_vars.items():
+        if v.ndim == 1 and np.issubdtype(v.dtype, np.number):
+            groups.setdefault(v.dims[0], []).append(name)
+    if not groups:
+        raise InputError(f"{path}: no 1-D numeric variable to plot")
+    plt = _plt()
+    fig, axes = plt.subplots(len(groups), 1, figsize=(7, 3.2 * len(groups)), squeeze=False)
+    for ax, (dim, names) in zip(axes[:, 0], groups.items()):
+        xdim = ds[dim] if dim in ds.coords else np.arange(ds.sizes[dim])
+        for name in names[:8]:
+            v = ds[name]
+            ax.plot(np.asarray(xdim), v.values, marker=".",
+                    label=f"{v.attrs.get('long_name', name)} [{v.attrs.get('units', '')}]")
+        unit = ds[dim].attrs.get("units", "") if dim in ds.coords else ""
+        ax.set(xlabel=f"{dim} [{unit}]" if unit else dim)
+        ax.legend(fontsize=7)
+    fig.suptitle(ds.attrs.get("title", path.name), fontsize=9)
+    fig.tight_layout()
+    png = Path(out) if out else path.with_suffix(".png")
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
