@@ -99,7 +99,7 @@ def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str = "amg", t
         from .contact.solve import solve_contact
 
         return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
-                             maxiter=maxiter, **contact_options)
+                             maxiter=maxiter, assembler=assembler, **contact_options)
     if contact_options:
         raise InputError(f"unknown options {sorted(contact_options)}")
     n = frame.n_nodes
