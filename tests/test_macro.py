@@ -1,0 +1,167 @@
+"""Macro cushion layer: closed forms, engagement order, scatter, reproducibility."""
+
+import numpy as np
+import pytest
+
+from homtex.errors import InputError
+from homtex.macro import macro_curve
+
+H0 = 20.0
+A = 12100.0
+
+
+def linear(e):
+    return 40.0 * np.asarray(e)  # kPa
+
+
+def stiffening(e):
+    e = np.asarray(e)
+    return 10.0 * e + 200.0 * e ** 3
+
+
+def bump(hs=6.0, hc=16.0):
+    """Cushion profile: seam height hs at x = 0 and d, cushion height hc in the middle."""
+    return lambda x, d: hs + (hc - hs) * np.sin(np.pi * np.asarray(x) / d)
+
+
+def test_no_seams_linear_law_closed_form():
+    ds = macro_curve(curve=linear, thickness=H0, strain=0.4, steps=41)
+    w = ds.plate_displacement.values
+    np.testing.assert_allclose(ds.force.values, 40.0 * (w / H0) * A * 1e-3, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(ds.stress.values, 40.0 * w / H0, rtol=1e-12, atol=1e-12)
+    assert ds.plate_displacement.attrs["units"] == "mm" and ds.force.attrs["units"] == "N"
+    assert ds.stress.attrs["units"] == "kPa"
+    assert w[-1] == pytest.approx(0.4 * H0)
+
+
+def test_no_seams_from_dataset_curve():
+    import xarray as xr
+
+    e = np.linspace(0.05, 0.5, 10)
+    curve = xr.Dataset({"stress": ("strain", stiffening(e))}, coords={"strain": e}, attrs={"thickness_mm": H0})
+    ds = macro_curve(curve=curve, strain=0.5, steps=11)
+    # the lookup is linear between the curve's nodes and the plate strains hit them
+    np.testing.assert_allclose(ds.stress.values[1:], stiffening(ds.strain.values[1:]), rtol=1e-12)
+
+
+def test_engagement_order_force_zero_until_tallest_cushion():
+    ds = macro_curve(curve=linear, thickness=H0, seam_distance=24.0, profile=bump(6.0, 16.0), steps=401,
+                     strain=0.6, n_columns=880)
+    h = ds.column_height.values
+    w = ds.plate_displacement.values
+    first = H0 - h.max()
+    assert first == pytest.approx(4.0, abs=0.01)
+    assert np.all(ds.force.values[w <= first] == 0.0)
+    assert np.all(ds.force.values[w > first + 0.05] > 0.0)
+    # engaged area = fraction of columns taller than the plate gap
+    gap = H0 - w
+    expected = (h[None, :] > gap[:, None]).mean(axis=1)
+    np.testing.assert_allclose(ds.engaged_fraction.values, expected)
+    # "held": each engaged column adds 40 kPa * (w - (H0 - h)) / H0: closed form
+    F = (40.0 * np.clip(w[:, None] - (H0 - h[None, :]), 0, None) / H0).sum(axis=1) * (A / 880) * 1e-3
+    np.testing.assert_allclose(ds.force.values, F, rtol=1e-10, atol=1e-12)
+    # force is nondecreasing and the stiffness grows as columns engage
+    assert np.all(np.diff(ds.force.values) >= -1e-12)
+
+
+def test_released_prestress_bounds_held():
+    kw = dict(curve=stiffening, thickness=H0, seam_distance=18.0, profile=bump(6.0, 12.0), strain=0.5)
+    held = macro_curve(pre_stress="held", **kw).force.values
+    rel = macro_curve(pre_stress="released", **kw).force.values
+    assert np.all(rel >= held - 1e-12) and rel[-1] > held[-1]
+
+
+def transition(ds):
+    f = ds.engaged_fraction.values
+    w = ds.plate_displacement.values
+    return w[np.argmax(f >= 0.999)] - w[np.argmax(f > 0)]
+
+
+def test_scatter_widens_transition_and_is_seeded():
+    kw = dict(curve=linear, thickness=H0, seam_distance=24.0, profile=bump(12.0, 16.0), strain=0.6, steps=601)
+    base = macro_curve(height_scatter=0.0, **kw)
+    sc = macro_curve(height_scatter=1.5, seed=3, **kw)
+    assert transition(sc) > transition(base) + 0.5
+    again = macro_curve(height_scatter=1.5, seed=3, **kw)
+    np.testing.assert_array_equal(sc.force.values, again.force.values)
+    other = macro_curve(height_scatter=1.5, seed=4, **kw)
+    assert not np.array_equal(sc.force.values, other.force.values)
+    # scatter is between cushions: all columns of one cushion are scaled by the same factor
+    ratio = sc.column_height.values / base.column_height.values
+    for k in np.unique(sc.column_cushion.values):
+        r = ratio[sc.column_cushion.values == k]
+        assert np.ptp(r[(sc.column_height.values[sc.column_cushion.values == k] < H0)]) < 1e-12
+
+
+def test_more_seams_longer_first_region():
+    # cushion height falls with seam distance (as the paper's Table 1: 20, 15, 8 mm)
+    def profile(x, d):
+        hc = H0 * (1.0 - np.exp(-d / 12.0))
+        return 5.0 + (hc - 5.0) * np.sin(np.pi * np.asarray(x) / d)
+
+    first = []
+    for d in (43.0, 24.0, 18.0):
+        ds = macro_curve(curve=stiffening, thickness=H0, seam_distance=d, profile=profile, strain=0.6, steps=601)
+        f = ds.force.values
+        w = ds.plate_displacement.values
+        first.append(w[np.argmax(f > 0.05 * f[-1])])
+    assert first[0] < first[1] < first[2]
+
+
+def test_errors_name_the_culprit():
+    with pytest.raises(InputError, match="seam_distance"):
+        macro_curve(curve=linear, thickness=H0, seam_distance=-1.0, profile=bump())
+    with pytest.raises(InputError, match="thickness"):
+        macro_curve(curve=linear)
+    with pytest.raises(InputError, match="pre_stress"):
+        macro_curve(curve=linear, thickness=H0, pre_stress="x")
+
+
+def test_truncated_curve_is_reported():
+    import xarray as xr
+
+    e = np.linspace(0.05, 0.2, 4)
+    curve = xr.Dataset({"stress": ("strain", 40 * e)}, coords={"strain": e},
+                       attrs={"thickness_mm": H0, "status": "failed at step 5"})
+    ds = macro_curve(curve=curve, strain=0.5)
+    assert ds.strain.values[-1] == pytest.approx(0.2)
+    assert "truncated" in ds.attrs["status"] and "failed at step 5" in ds.attrs["status"]
+
+
+def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
+    """Without injected inputs macro_curve calls homtex.seam_profile and homtex.compress."""
+    from pathlib import Path
+
+    seams = pytest.importorskip("homtex.seams")
+    import homtex.contact as contact
+    import xarray as xr
+
+    cell_file = Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml"
+    if not cell_file.exists():
+        pytest.skip("no spacer cell")
+    import homtex
+
+    cell = homtex.load_cell(cell_file, build=False)
+    calls = []
+
+    real = contact.compress
+
+    def fake_compress(c, *, strain, **kw):  # the yarn-level curve to 60 % is slow: a linear stand-in
+        if strain != 0.6:  # seam_profile's own small-strain modulus: the real thing
+            return real(c, strain=strain, **kw)
+        calls.append(strain)
+        e = np.linspace(0.0, strain, 11)[1:]
+        return xr.Dataset({"stress": ("strain", 40.0 * e)}, coords={"strain": e},
+                          attrs={"thickness_mm": H0, "status": "ok"})
+
+    monkeypatch.setattr(contact, "compress", fake_compress)
+    first = {}
+    for d in (43.0, 24.0, 18.0):
+        ds = macro_curve(cell, seam_distance=d, strain=0.6, steps=301)
+        prof = seams.seam_profile(cell, seam_distance=d)
+        hc = min(float(prof["cushion_height"]), H0)
+        # the punch first meets the tallest column: the profile's cushion height (clipped at H0)
+        assert ds.attrs["first_contact_mm"] == pytest.approx(H0 - hc, abs=0.05)
+        first[d] = ds.attrs["first_contact_mm"]
+    assert calls == [0.6, 0.6, 0.6]
+    assert first[43.0] < first[24.0] < first[18.0]

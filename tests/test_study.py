@@ -1,0 +1,227 @@
+"""Parameter studies: resume after a kill, failed points, executors, sampling."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from homtex.errors import InputError
+from homtex.io import check_meta, read_netcdf
+from homtex.study import StudyError, load_study, run_study
+
+ROOT = Path(__file__).resolve().parents[1]
+
+GRID = """
+[study]
+name = "analytic_grid"
+task = "analytic"
+[options]
+z = 0.5
+fail_above = 2.5
+sleep = {sleep}
+[parameters]
+x = [0.0, 1.0, 2.0, 3.0]
+y = [-1.0, 0.0, 1.0]
+"""
+
+
+def write(tmp_path, text, name="study.toml"):
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return p
+
+
+def test_grid_values_failures_and_metadata(tmp_path):
+    p = write(tmp_path, GRID.format(sleep=0.0))
+    ds = run_study(p, tmp_path / "out", workers=1, progress=False)
+    assert ds["value"].dims == ("x", "y") and ds["curve"].dims == ("x", "y", "t")
+    ok = ds.x.values <= 2.5
+    X, Y = np.meshgrid(ds.x.values, ds.y.values, indexing="ij")
+    exact = np.sin(X) + Y ** 2 + 0.5 * X
+    np.testing.assert_allclose(ds["value"].values[ok], exact[ok], rtol=1e-15)
+    # the failing points (x = 3) are recorded and masked; the others completed
+    assert (ds.status.values[~ok] == 1).all() and (ds.status.values[ok] == 0).all()
+    assert all("exceeds fail_above" in e for e in ds.error.values[~ok].ravel())
+    assert all(e == "" for e in ds.error.values[ok].ravel())
+    assert np.isnan(ds["value"].values[~ok]).all() and np.isfinite(ds["value"].values[ok]).all()
+    assert ds.attrs["points_failed"] == 3 and ds.attrs["points_ok"] == 9
+    assert check_meta(ds) == []
+    assert "homtex_version" in ds.attrs
+    on_disk = read_netcdf(tmp_path / "out" / "result.nc")
+    xr.testing.assert_identical(on_disk, ds)
+
+
+def test_budget_stop_and_resume_identical(tmp_path):
+    p = write(tmp_path, GRID.format(sleep=0.0))
+    full = run_study(p, tmp_path / "full", workers=1, progress=False)
+    part = run_study(p, tmp_path / "res", workers=1, progress=False, max_points=5)
+    assert part.attrs["complete"] == 0 and (part.status.values == -1).sum() == 7
+    assert not (tmp_path / "res" / "result.nc").exists()
+    rng = np.random.default_rng(7)
+    for k in rng.integers(1, 4, 3):  # several interruptions at random points
+        run_study(p, tmp_path / "res", workers=1, progress=False, max_points=int(k))
+    resumed = run_study(p, tmp_path / "res", workers=1, progress=False)
+    xr.testing.assert_identical(resumed, full)
+
+
+def test_lost_points_and_stray_temp_files_resume_identical(tmp_path):
+    p = write(tmp_path, GRID.format(sleep=0.0))
+    full = run_study(p, tmp_path / "out", workers=1, progress=False)
+    files = sorted((tmp_path / "out" / "points").glob("*.nc"))
+    for i in np.random.default_rng(3).choice(len(files), 5, replace=False):
+        files[i].unlink()
+    (tmp_path / "out" / "points" / ".00003.nc.abc.tmp").write_bytes(b"half a file")
+    again = run_study(p, tmp_path / "out", workers=1, progress=False)
+    xr.testing.assert_identical(again, full)
+    assert not list((tmp_path / "out" / "points").glob(".*.tmp"))
+
+
+def test_killed_process_resumes_identical(tmp_path):
+    p = write(tmp_path, GRID.format(sleep=0.15))
+    out = tmp_path / "killed"
+    code = f"from homtex.study import run_study; run_study({str(p)!r}, {str(out)!r}, workers=1, progress=False)"
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT)
+    try:
+        deadline = time.time() + 30
+        while len(list((out / "points").glob("*.nc"))) < 3 and time.time() < deadline:
+            time.sleep(0.02)
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait()
+    done = len(list((out / "points").glob("*.nc")))
+    assert 3 <= done < 12, "the kill should land mid-study"
+    resumed = run_study(p, out, workers=1, progress=False)
+    full = run_study(p, tmp_path / "full", workers=1, progress=False)
+    xr.testing.assert_identical(resumed, full)
+
+
+def test_process_pool_matches_serial(tmp_path):
+    p = write(tmp_path, GRID.format(sleep=0.0))
+    serial = run_study(p, tmp_path / "a", workers=1, progress=False)
+    pool = run_study(p, tmp_path / "b", workers=2, progress=True)
+    xr.testing.assert_identical(serial, pool)
+
+
+def test_dask_local_cluster(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    p = write(tmp_path, GRID.format(sleep=0.0))
+    serial = run_study(p, tmp_path / "a", workers=1, progress=False)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        ds = run_study(p, tmp_path / "b", scheduler=client, progress=False)
+        # the address path (a Client made by the runner) resumes the same folder
+        (tmp_path / "b" / "points" / "00004.nc").unlink()
+        ds2 = run_study(p, tmp_path / "b", scheduler=cluster.scheduler_address, progress=False)
+    xr.testing.assert_identical(ds, serial)
+    xr.testing.assert_identical(ds2, serial)
+
+
+SAMPLED = """
+[study]
+name = "sampled"
+task = "analytic"
+[sampling]
+method = "{method}"
+n = {n}
+seed = {seed}
+[sampling.bounds]
+x = [0.0, 2.0]
+y = [-1.0, 1.0]
+[units]
+x = "mm"
+"""
+
+
+@pytest.mark.parametrize("method,n", [("lhs", 10), ("sobol", 16), ("sobol", 12)])
+def test_sampling_seeded_and_in_bounds(tmp_path, method, n):
+    a = load_study(write(tmp_path, SAMPLED.format(method=method, n=n, seed=4), "a.toml"))
+    b = load_study(write(tmp_path, SAMPLED.format(method=method, n=n, seed=4), "b.toml"))
+    c = load_study(write(tmp_path, SAMPLED.format(method=method, n=n, seed=5), "c.toml"))
+    pa = np.array([[q["x"], q["y"]] for q in a.points])
+    pb = np.array([[q["x"], q["y"]] for q in b.points])
+    pc = np.array([[q["x"], q["y"]] for q in c.points])
+    np.testing.assert_array_equal(pa, pb)
+    assert not np.allclose(pa, pc)
+    assert pa.shape == (n, 2) and (pa[:, 0] >= 0).all() and (pa[:, 0] <= 2).all()
+    assert (pa[:, 1] >= -1).all() and (pa[:, 1] <= 1).all()
+    if method == "lhs":  # one sample in each of the n strata of every axis
+        for j, (lo, hi) in enumerate([(0, 2), (-1, 1)]):
+            strata = np.floor((pa[:, j] - lo) / (hi - lo) * n).astype(int)
+            assert sorted(strata) == list(range(n))
+
+
+def test_sampled_study_dataset(tmp_path):
+    p = write(tmp_path, SAMPLED.format(method="lhs", n=8, seed=1))
+    ds = run_study(p, tmp_path / "out", workers=1, progress=False)
+    assert ds["value"].dims == ("sample",) and ds.x.dims == ("sample",)
+    np.testing.assert_allclose(ds["value"].values, np.sin(ds.x.values) + ds.y.values ** 2, rtol=1e-15)
+    assert ds.x.attrs["units"] == "mm" and check_meta(ds) == []
+
+
+def test_homogenize_task_on_square_cell_scales_with_E(tmp_path):
+    p = write(tmp_path, f"""
+    [study]
+    name = "square_E"
+    cell = "{ROOT / 'cells' / 'square.toml'}"
+    task = "homogenize"
+    [options]
+    solver = "direct"
+    [parameters]
+    "yarns.strut.E" = [1000.0, 3000.0]
+    "yarns.strut.radius" = [0.04, 0.05]
+    """)
+    ds = run_study(p, tmp_path / "out", workers=1, progress=False)
+    assert (ds.status.values == 0).all()
+    C = ds["C"]
+    # linear elasticity: the effective stiffness is proportional to the yarn modulus
+    np.testing.assert_allclose(C.sel({"yarns.strut.E": 3000.0}).values, 3 * C.sel({"yarns.strut.E": 1000.0}).values,
+                               rtol=1e-8, atol=1e-12)
+    # stretch-dominated square lattice: C11 = E A / a (per unit length, a = 1 mm)
+    c11 = C.sel(row=C.row.values[0], col=C.col.values[0])
+    r = ds["yarns.strut.radius"].values
+    E = ds["yarns.strut.E"].values
+    np.testing.assert_allclose(c11.values, E[:, None] * np.pi * r[None, :] ** 2, rtol=1e-6)
+    assert ds.attrs["cell.name"] == "square" and check_meta(ds) == []
+
+
+def test_bad_study_files_named(tmp_path):
+    with pytest.raises(StudyError, match=r"\[sampling\] key 'method'"):
+        load_study(write(tmp_path, SAMPLED.format(method="grid", n=4, seed=1)))
+    with pytest.raises(StudyError, match=r"\[study\] key 'task'.*unknown task 'nope'"):
+        load_study(write(tmp_path, '[study]\nname = "a"\ntask = "nope"\n[parameters]\nx = [1.0]\n'))
+    with pytest.raises(InputError, match="changes the cell"):
+        load_study(write(tmp_path, '[study]\nname = "a"\ntask = "analytic"\n[parameters]\n"yarns.s.E" = [1.0]\n'))
+    # an output folder of another study is not mixed in
+    p1 = write(tmp_path, GRID.format(sleep=0.0), "g1.toml")
+    run_study(p1, tmp_path / "out", workers=1, progress=False, max_points=1)
+    p2 = write(tmp_path, GRID.format(sleep=0.0).replace("z = 0.5", "z = 0.7"), "g2.toml")
+    with pytest.raises(StudyError, match="different study"):
+        run_study(p2, tmp_path / "out", workers=1, progress=False)
+
+
+def test_macro_study_with_curve_file(tmp_path):
+    e = np.linspace(0.05, 0.5, 10)
+    xr.Dataset({"stress": ("strain", 40.0 * e)}, coords={"strain": e},
+               attrs={"thickness_mm": 20.0}).to_netcdf(tmp_path / "curve.nc")
+    p = write(tmp_path, """
+    [study]
+    name = "macro"
+    task = "macro"
+    [options]
+    curve_file = "curve.nc"
+    strain = 0.5
+    steps = 51
+    [parameters]
+    height_scatter = [0.0, 1.0]
+    """)
+    ds = run_study(p, tmp_path / "out", workers=1, progress=False)
+    assert ds.force.dims == ("height_scatter", "step")
+    # no seams: the closed form F = 40 kPa * strain * 12100 mm^2, independent of the scatter
+    np.testing.assert_allclose(ds.force.values, 40.0 * ds.strain.values * 12100.0 * 1e-3, rtol=1e-12)
