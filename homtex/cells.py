@@ -421,6 +421,23 @@ def _plain(v):
     return v
 
 
+def find_cell(name) -> Path:
+    """Path of a cell file: ``name`` itself if it exists, else a shipped cell of that name
+    (``"spacer_20mm"`` or ``"spacer_20mm.toml"``) from the source tree's ``cells/`` or the
+    installed copy in ``<prefix>/share/homtex/cells``."""
+    import sys
+
+    p = Path(name)
+    if p.exists():
+        return p
+    fname = p.name if p.suffix == ".toml" else p.name + ".toml"
+    for folder in (Path(__file__).resolve().parents[1] / "cells",
+                   Path(sys.prefix) / "share" / "homtex" / "cells"):
+        if (folder / fname).exists():
+            return folder / fname
+    return p
+
+
 def load_cell(path, *, build: bool = True) -> Cell:
     """Read, validate and (by default) build a cell file.
 
@@ -433,7 +450,7 @@ def load_cell(path, *, build: bool = True) -> Cell:
     ------
     CellError (an InputError) naming the file, table and key of the culprit.
     """
-    p = Path(path)
+    p = find_cell(path)
     try:
         text = p.read_bytes().decode("utf-8")
     except FileNotFoundError:
@@ -444,7 +461,7 @@ def load_cell(path, *, build: bool = True) -> Cell:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CellError(f"not valid TOML: {exc}", file=path) from None
-    cell = Cell(data, path)
+    cell = Cell(data, p)
     if build:
         cell.build()
     return cell

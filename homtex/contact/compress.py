@@ -75,7 +75,7 @@ def _default_fixed(frame, x):
 def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "displacement",
              contact: Contact | None = None, pressure=None, fixed=None, thickness: float | None = None,
              area: float | None = None, solver: str = "direct", tol: float = 1e-10,
-             maxiter: int | None = None):
+             maxiter: int | None = None, max_cuts: int = 4):
     """Compression curve of a cell between two rigid frictionless plates.
 
     Parameters
@@ -96,6 +96,10 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         (z_max + r) - (z_min - r)); the bottom plate touches the lowest yarn surface.
     area : nominal area for the stress, mm^2 (default |p1 x p2| of a 2-periodic frame in x-y,
         else the x-y bounding box of the yarns).
+
+    max_cuts : a step whose contact iteration fails (cycling active set, penetration, solver
+        failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
+        1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
 
     Returns
     -------
@@ -172,13 +176,39 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     status = "ok"
     u_ref = None
     warm = None
+    if int(max_cuts) != max_cuts or max_cuts < 0:
+        raise InputError(f"max_cuts must be a non-negative integer, got {max_cuts!r}")
+
+    def apply(value):
+        if control == "displacement":
+            cs.set_plate(1, displacement=-value * H0)
+        else:
+            cs.set_plate(1, force=value * area * 1e-3)
+
+    def advance(a, b, u0, w0, cuts):
+        """Solve at load level b from the converged state at a; halve the step on failure.
+        Returns (result, number of sub-steps used)."""
+        apply(b)
+        try:
+            return cs.solve(u_ref=u0, warm_keys=w0), 1
+        except (SolverError, np.linalg.LinAlgError) as err:
+            if cuts == 0:
+                raise
+            first_error = err
+        mid = 0.5 * (a + b)
+        try:
+            r1, n1 = advance(a, mid, u0, w0, cuts - 1)
+            r2, n2 = advance(mid, b, r1.extra["u_ext"], r1.extra["active_keys"], cuts - 1)
+        except (SolverError, np.linalg.LinAlgError) as err:
+            raise type(err)(f"{err} (after halving the step {max_cuts - cuts + 1} time(s); "
+                            f"first failure: {first_error})") from err
+        return r2, n1 + n2
+
+    rec["substeps"] = []
+    previous = 0.0
     for step, target in enumerate(targets, start=1):
         try:
-            if control == "displacement":
-                cs.set_plate(1, displacement=-target * H0)
-            else:
-                cs.set_plate(1, force=target * area * 1e-3)
-            res = cs.solve(u_ref=u_ref, warm_keys=warm)
+            res, nsub = advance(previous, target, u_ref, warm, int(max_cuts))
         except (SolverError, np.linalg.LinAlgError, RuntimeError) as err:
             label = f"strain {target:.4g}" if control == "displacement" else f"pressure {target:.4g} kPa"
             status = f"failed at step {step} ({label}): {err}"
@@ -189,6 +219,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
             break
         u_ref = e["u_ext"]
         warm = e["active_keys"]
+        previous = target
+        rec["substeps"].append(nsub)
         w = float(e["plate_displacement"][1])
         F = float(e["plate_force"][1])
         c = res.contacts
@@ -241,8 +273,9 @@ def _dataset(xr, rec, groups, status, attrs):
         "active_yarn_yarn": ("1", "active yarn-yarn contacts"),
         "active_yarn_plate": ("1", "active yarn-plate contacts"),
         "max_penetration": ("mm", "largest overlap of the linearised contact gaps"),
-        "contact_iterations": ("1", "active-set iterations of the step"),
-        "linear_solves": ("1", "linear solves of the step"),
+        "contact_iterations": ("1", "active-set iterations of the step (last sub-step)"),
+        "linear_solves": ("1", "linear solves of the step (last sub-step)"),
+        "substeps": ("1", "sub-steps the step needed (1: none; more after halving a failed step)"),
         "contact_energy": ("N mm", "energy stored in the contact penalty springs"),
         "axial": ("N mm", "axial strain energy"),
         "torsion": ("N mm", "torsional strain energy"),
