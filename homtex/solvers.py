@@ -195,6 +195,7 @@ class ScaledAMG:
             presmoother=cheb, postsmoother=cheb, improve_candidates=None,
             max_coarse=max(1, int(max_coarse) // bs), coarse_solver="splu")
         self.shape = A.shape
+        self.degree = degree  # Chebyshev degree (homtex.krylov rebuilds the smoother from it)
 
     def operator_complexity(self) -> float:
         return float(self.ml.operator_complexity())
@@ -315,6 +316,20 @@ class LinearSolver:
                         f"; the residual still falls (x{drop:.3g} per 50 iterations): raise maxiter")
             raise SolverError(msg, history=h, report=rep)
         return x, rep
+
+
+    def refine(self, b, x) -> tuple[np.ndarray, float]:
+        """One step of iterative refinement with the direct factor: returns (x + dx, ||dx||/||x||).
+
+        The relative correction estimates the forward error, which the residual check in
+        :meth:`solve` cannot see on an ill-conditioned system (its backward error stays small).
+        """
+        if self.method != "direct":
+            raise ValueError("refine() needs method='direct'")
+        r = np.asarray(b, dtype=float) - self.A @ x
+        with _blas_single():
+            dx = self.factor(r) if self.backend == "cholmod" else self.factor.solve(r)
+        return x + dx, float(np.linalg.norm(dx) / max(np.linalg.norm(x), 1e-300))
 
 
 def solve(A, b, *, method="amg", B=None, tol=1e-10, maxiter=None):

@@ -355,3 +355,22 @@ def test_compress_reports_a_singular_operator_with_a_clear_status():
     assert ds.attrs["status"].startswith("failed at step 1")
     assert "singular" in ds.attrs["status"]
     assert ds.sizes["strain"] == 0
+
+
+def test_ill_conditioning_from_a_huge_penalty_is_detected_not_returned():
+    """A penalty 1e12 x the beam stiffness: SuperLU's residual stays at round-off but the state
+    is wrong; the refinement check raises. At 1e2 x the same problem solves and matches the
+    penalised series formula."""
+    fr, fixed, ca, cb = crossing()
+    P, g0 = 0.01, 0.01
+    loads = {ca: (0, 0, -P, 0, 0, 0)}
+    fA = midspan_flexibility(100.0, R0, E0, NU)
+    fB = midspan_flexibility(100.0, R0, 3 * E0, NU)
+    k_ok = 1e2 / fB
+    res = homtex.solve_static(fr, fixed, loads, solver="direct",
+                              contact=Contact(enforcement="penalty", penalty=k_ok))
+    F, _, _ = series_solution(P, g0, fA, fB, k=k_ok)
+    assert res.contacts.force[res.contacts.active].sum() == pytest.approx(F, rel=1e-8)
+    with pytest.raises(SolverError, match="ill-conditioned"):
+        homtex.solve_static(fr, fixed, loads, solver="direct",
+                            contact=Contact(enforcement="penalty", penalty=1e12 / fB))

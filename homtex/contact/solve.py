@@ -298,7 +298,12 @@ class ContactSolver:
         t0 = time.perf_counter()
         try:
             x, rep = lin.solve(b, x0=x0)
-        except SolverError:
+        except SolverError as err:
+            if self.solver == "direct":
+                raise SolverError(
+                    f"the contact system is too ill-conditioned for an accurate solve ({err}); the "
+                    f"penalty {self.k:.3g} N/mm is too large for these yarns - lower Contact(penalty=...) "
+                    f"or use enforcement='augmented'", history=err.history, report=err.report) from err
             if not lin.reused:
                 raise
             # a stale hierarchy: rebuild once and retry
@@ -309,9 +314,7 @@ class ContactSolver:
             # one step of iterative refinement: the size of the correction estimates the forward
             # error, which a large penalty inflates (cond ~ penalty / beam stiffness) while the
             # backward error (the residual) stays at round-off
-            dx, _ = lin.solve(b - A @ x)
-            fwd = float(np.linalg.norm(dx) / max(np.linalg.norm(x), 1e-300))
-            x = x + dx
+            x, fwd = lin.refine(b, x)
             st["forward_error"] = max(st.get("forward_error", 0.0), fwd)
             if fwd > self.contact.max_forward_error:
                 raise SolverError(
