@@ -431,7 +431,8 @@ class Homogenization:
 
 
 def homogenize(frame: Frame, *, solver: str = "amg", tol: float = 1e-10, free=None,
-               maxiter: int | None = None, nullspace: str = "rigid") -> Homogenization:
+               maxiter: int | None = None, nullspace: str = "rigid",
+               batched: bool = True) -> Homogenization:
     """Effective stiffness of a periodic frame (one operator setup for all load cases).
 
     Parameters
@@ -443,6 +444,9 @@ def homogenize(frame: Frame, *, solver: str = "amg", tol: float = 1e-10, free=No
         stress in every case; ``C`` is then the condensed stiffness over the others.
     nullspace : AMG near-null space: "rigid" (6 rigid-body modes; the rotations are only
         approximate on a periodic cell) or "translations".
+    batched : with solver="amg", solve the unit cases together (lockstep block CG and a
+        block V-cycle, :func:`homtex.krylov.solve_many`: the matrices are read once for all
+        cases); False solves them one after another.
 
     Returns
     -------
@@ -466,9 +470,15 @@ def homogenize(frame: Frame, *, solver: str = "amg", tol: float = 1e-10, free=No
     t0 = time.perf_counter()
     W = np.empty_like(b)
     reports = []
-    for q in range(len(H)):
-        W[q], rep = op.solve(b[q])
-        reports.append(rep)
+    if solver == "amg" and batched and len(H) > 1:
+        from .krylov import solve_many
+
+        W, reports = solve_many(op.lin, b, names=[f"unit case {c}" for c in comps])
+        W[:, op.mask] = 0.0
+    else:
+        for q in range(len(H)):
+            W[q], rep = op.solve(b[q])
+            reports.append(rep)
     t_solve = time.perf_counter() - t0
     t0 = time.perf_counter()
     n = frame.n_nodes
@@ -504,7 +514,8 @@ def homogenize(frame: Frame, *, solver: str = "amg", tol: float = 1e-10, free=No
         energy=energy, reports=reports, consistency=consistency,
         assembly_seconds=op.assembly_seconds, setup_seconds=op.setup_seconds,
         solve_seconds=t_solve, post_seconds=t_post, total_seconds=time.perf_counter() - t_start,
-        info={"solver": solver, "nullspace": nullspace, "ndof": frame.ndof})
+        info={"solver": solver, "nullspace": nullspace, "ndof": frame.ndof,
+              "batched": bool(solver == "amg" and batched and len(H) > 1)})
 
 
 def _post(frame, H, U):
