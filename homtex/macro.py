@@ -133,7 +133,8 @@ def column_heights(H0: float, *, seam_distance=None, profile=None, height_scatte
 def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, plate_area: float = 12100.0,
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
                 steps: int = 201, thickness: float | None = None, pre_stress: str = "held",
-                seam_offset: float = 0.0, compress_options: dict | None = None):
+                seam_offset: float = 0.0, compress_options: dict | None = None,
+                profile_options: dict | None = None):
     """Force-compression curve of a (seamed) specimen under a flat punch: the cushion layer.
 
     Parameters
@@ -153,6 +154,8 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     thickness : H0, mm (default from the curve's ``thickness_mm`` attribute or the cell).
     pre_stress : "held" (default) or "released" (see the module docstring).
     seam_offset : position of a seam line from the plate edge, mm (profile x = 0 is a seam line).
+    compress_options, profile_options : keyword arguments for ``homtex.compress`` and
+        ``homtex.seam_profile`` (e.g. ``{"method": "foundation"}``) where they are called.
 
     Returns
     -------
@@ -190,7 +193,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         from .seams import seam_profile
 
         ts = time.perf_counter()
-        profile = seam_profile(cell, seam_distance=seam_distance)
+        profile = seam_profile(cell, seam_distance=seam_distance, **(profile_options or {}))
         t_sub += time.perf_counter() - ts
     H0 = _thickness(cell, curve, thickness)
     law, eps_max = unseamed_law(curve)

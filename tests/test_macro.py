@@ -157,8 +157,9 @@ def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
     monkeypatch.setattr(contact, "compress", fake_compress)
     first = {}
     for d in (43.0, 24.0, 18.0):
-        ds = macro_curve(cell, seam_distance=d, strain=0.6, steps=301)
-        prof = seams.seam_profile(cell, seam_distance=d)
+        ds = macro_curve(cell, seam_distance=d, strain=0.6, steps=301,
+                         profile_options={"method": "foundation"})
+        prof = seams.seam_profile(cell, seam_distance=d, method="foundation")
         hc = min(float(prof["cushion_height"]), H0)
         # the punch first meets the tallest column: the profile's cushion height (clipped at H0)
         assert ds.attrs["first_contact_mm"] == pytest.approx(H0 - hc, abs=0.05)
