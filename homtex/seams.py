@@ -8,7 +8,7 @@ Two models:
     yarn-yarn contact while eps0 is ramped up; the profile h(x) is measured on the outer yarn
     surfaces. studies/calibrate_seam.py tries to calibrate eps0 once on d = 24 mm (then 18 and
     43 mm would be predictions with nothing changed).
-    Limits (measured, see reports/seam_yarn.md): with geometrically linear beams the seam dip is
+    Limits (measured, studies/calibrate_seam.py): with geometrically linear beams the seam dip is
     local (a few mm wide) and the cushion maximum stays at or slightly above the thickness for
     every eps0, so the paper's 14.33 mm at d = 24 mm cannot be reached by eps0 alone: the cell
     file's ``prestrain`` is a nominal, UNCALIBRATED value. The contact active set (pdas) can cycle

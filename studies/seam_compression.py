@@ -71,7 +71,7 @@ res.attrs.update(status_seamed=seamed.attrs["status"], status_unseamed=plain.att
                  seam_distance_mm=seamed.attrs["seam_distance_mm"], prestrain=seamed.attrs["prestrain"],
                  sewn_thickness_mm=seamed.attrs["thickness_mm"], sewn_cushion_height_mm=seamed.attrs["cushion_height_mm"],
                  sewn_seam_height_mm=seamed.attrs["seam_height_mm"], steps=steps,
-                 note="prestrain is the cell file's nominal (uncalibrated) value; see reports/seam_yarn.md")
+                 note="prestrain is the cell file's nominal (uncalibrated) value; studies/calibrate_seam.py shows no value reaches the paper cushions")
 res.to_netcdf(out / "seam_compression.nc")
 
 fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))

@@ -100,7 +100,7 @@ def test_two_stitch_supercell_same_profile(cell, prof):
 
 def test_mean_height_increases_with_seam_distance(cell, prof):
     # the yarn model's dip is local (a few mm), so the cushion MAX stays near the thickness (see
-    # reports/seam_yarn.md); the mean height (fabric volume per area) rises with d
+    # studies/calibrate_seam.py); the mean height (fabric volume per area) rises with d
     m = [float(homtex.seam_profile(cell, seam_distance=d, prestrain=0.2, steps=2).height.mean())
          for d in (8.5, 21.2)]
     mid = float(prof[0.2].height.mean())
