@@ -567,6 +567,40 @@ def cell_summary(path, out: Path) -> dict:
     return paths
 
 
+def homogenize_cell(path, out: Path, *, solver="amg"):
+    """Effective stiffness of a periodic cell file: netCDF + a PNG of C and the constants.
+
+    Returns (Dataset, [paths]).
+    """
+    from .cells import load_cell
+    from .periodic import homogenize
+
+    cell = load_cell(path)
+    res = homogenize(cell.frame, solver=solver)
+    ds = res.to_dataset()
+    ds.attrs.update({f"cell_{k}": v for k, v in cell.attrs().items()})
+    _attrs(ds, title=f"effective stiffness of {cell.name}")
+    out = Path(out)
+    nc = _save(ds, out / f"{cell.name}_homogenized.nc")
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    C = res.C
+    im = ax.imshow(C, cmap="viridis")
+    for (i, j), v in np.ndenumerate(C):
+        ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7, color="w")
+    ax.set_xticks(range(len(res.components)), res.components)
+    ax.set_yticks(range(len(res.components)), res.components)
+    fig.colorbar(im, ax=ax, label=res.units)
+    consts = ", ".join(f"{k}={v:.3g}" for k, v in res.engineering_constants().items())
+    ax.set_title(f"{cell.name}: C ({res.units})\n{consts}", fontsize=8)
+    fig.tight_layout()
+    png = out / f"{cell.name}_homogenized.png"
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return ds, [nc, png]
+
+
 def compress_cell(path, out: Path, *, strain=0.3, steps=20):
     cell = _load(path)
     curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps)
