@@ -229,9 +229,11 @@ def cushion_stage(cell, out: Path, *, distances=(18.0, 24.0, 43.0), low_prestrai
         for ax, k in zip(axes[:, col], keys):
             p = profiles[m][k]
             dd = float(p.attrs.get("effective_seam_distance_mm", k[0]))
-            x0 = p.x.values - p.x.values[0]
+            # one period, closed with its first sample one seam distance on (no gaps between repeats)
+            x0 = np.r_[p.x.values - p.x.values[0], dd]
+            hh = np.r_[p.height.values, p.height.values[0]]
             for rep in range(int(np.ceil(width / dd)) + 1):
-                ax.fill_between(x0 + rep * dd, 0.5 * (H0 - p.height.values), 0.5 * (H0 + p.height.values),
+                ax.fill_between(x0 + rep * dd, 0.5 * (H0 - hh), 0.5 * (H0 + hh),
                                 color="tab:blue" if m == "yarn" else "tab:green", alpha=0.55, lw=0)
             ax.set(ylim=(-1, H0 + 2), xlim=(0, width), ylabel="z, mm")
             ax.set_title(f"{m}: {ds.case.values[keys.index(k)]}, cushion {float(p['cushion_height']):.2f} mm, "
