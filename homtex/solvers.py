@@ -257,7 +257,11 @@ class LinearSolver:
                 self.M = sp.diags(inv)
             else:
                 if _cholmod is not None:
-                    self.factor = _cholmod(sp.csc_matrix(A))
+                    try:
+                        self.factor = _cholmod(sp.csc_matrix(A))
+                    except Exception as err:  # CholmodNotPositiveDefiniteError and kin
+                        raise SolverError(f"CHOLMOD factorisation failed ({err}): the matrix is singular "
+                                          f"or not positive definite") from err
                     self.backend = "cholmod"
                 else:
                     from scipy.sparse.linalg import splu
