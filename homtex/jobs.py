@@ -125,13 +125,13 @@ def _timed(fn, *args, **kw):
     return out, time.perf_counter() - t0
 
 
-def unseamed_stage(cell, out: Path, *, strain=0.5, steps=25) -> tuple:
+def unseamed_stage(cell, out: Path, *, strain=0.5, steps=25, progress=False) -> tuple:
     """Yarn-level compression of the unseamed cell between plates: curve, modulus, DIN-style
     stresses, energy by yarn system. Returns (curve Dataset, summary dict, {name: path})."""
     from .contact import compress
     from .seams import compression_summary
 
-    curve, sec = _timed(compress, cell, strain=strain, steps=steps)
+    curve, sec = _timed(compress, cell, strain=strain, steps=steps, progress=progress)
     if curve.sizes["strain"] == 0:
         raise InputError(f"unseamed compression of {cell.name} failed at once: {curve.attrs['status']}")
     summ = compression_summary(curve)
@@ -605,7 +605,7 @@ def homogenize_cell(path, out: Path, *, solver="amg"):
 
 def compress_cell(path, out: Path, *, strain=0.3, steps=20):
     cell = _load(path)
-    curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps)
+    curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True)
     print(f"modulus {summ['modulus_kPa']:.1f} kPa; stress at 10/25/40 %: {summ['stress_10_kPa']:.2f} / "
           f"{summ['stress_25_kPa']:.2f} / {summ['stress_40_kPa']:.2f} kPa; status {curve.attrs['status']}")
     return curve, list(paths.values())

@@ -59,6 +59,7 @@ from typing import Callable
 import numpy as np
 
 from .cells import TABLES, CellError, load_cell
+from .progress import Progress
 from .errors import InputError
 
 try:
@@ -521,43 +522,14 @@ def _executor(scheduler, workers, n_todo):
     return _Serial() if int(workers) == 1 else _Pool(int(workers))
 
 
-class _Progress:
-    """rich progress bar when available and wanted, else plain lines on stderr."""
+class _Progress(Progress):
+    """The study's progress: points done, failures noted."""
 
     def __init__(self, total, done, name, enabled):
-        self.total, self.done, self.enabled = total, done, enabled
-        self.bar = None
-        self.t0 = time.perf_counter()
-        self.next_line = 0.0
-        if not enabled:
-            return
-        try:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-            self.bar = Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
-                                TimeRemainingColumn(), transient=False)
-            self.bar.start()
-            self.task = self.bar.add_task(f"study {name}", total=total, completed=done)
-        except ImportError:
-            self.bar = None
-            print(f"study {name}: {done}/{total} points already done", file=sys.stderr)
+        super().__init__(total, f"study {name}", done=done, unit="points", enabled=enabled)
 
     def step(self, failed: bool):
-        self.done += 1
-        if not self.enabled:
-            return
-        if self.bar is not None:
-            self.bar.update(self.task, advance=1)
-        else:
-            frac = self.done / self.total
-            if frac >= self.next_line or self.done == self.total:
-                print(f"  {self.done}/{self.total} points ({time.perf_counter() - self.t0:.1f} s)"
-                      + (" - a point failed" if failed else ""), file=sys.stderr)
-                self.next_line = frac + 0.1
-
-    def close(self):
-        if self.bar is not None:
-            self.bar.stop()
+        super().step("a point failed" if failed else "")
 
 
 # ------------------------------------------------------------------------------------ combine

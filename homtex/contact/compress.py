@@ -75,7 +75,7 @@ def _default_fixed(frame, x):
 def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "displacement",
              contact: Contact | None = None, pressure=None, fixed=None, thickness: float | None = None,
              area: float | None = None, solver: str = "direct", tol: float = 1e-10,
-             maxiter: int | None = None, max_cuts: int = 4):
+             maxiter: int | None = None, max_cuts: int = 4, progress: bool = False):
     """Compression curve of a cell between two rigid frictionless plates.
 
     Parameters
@@ -100,6 +100,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     max_cuts : a step whose contact iteration fails (cycling active set, penetration, solver
         failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
         1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
+    progress : show a progress bar (rich if installed, else lines on stderr).
 
     Returns
     -------
@@ -205,6 +206,9 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
 
     rec["substeps"] = []
     previous = 0.0
+    from ..progress import Progress
+
+    bar = Progress(len(targets), "compression steps", enabled=progress)
     for step, target in enumerate(targets, start=1):
         try:
             res, nsub = advance(previous, target, u_ref, warm, int(max_cuts))
@@ -222,6 +226,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         warm = e["active_keys"]
         previous = target
         rec["substeps"].append(nsub)
+        bar.step(f"{nsub} sub-steps" if nsub > 1 else "")
         w = float(e["plate_displacement"][1])
         F = float(e["plate_force"][1])
         c = res.contacts
@@ -243,6 +248,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
             rec[k].append(float(res.energy[k].sum()))
             tot += res.energy[k]
         rec["group_energy"].append([float(tot[mk].sum()) for mk in masks])
+    bar.close()
     seconds = time.perf_counter() - t0
     return _dataset(xr, rec, names, status, dict(
         control=control, thickness_mm=H0, area_mm2=area, area_source=area_source,
