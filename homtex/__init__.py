@@ -26,6 +26,8 @@ _LAZY = {
     "Contact": ".contact",
     "compress": ".contact",
     "seam_profile": ".seams",
+    "seam_compression": ".seams",
+    "Plate": ".contact",
     "macro_curve": ".macro",
     "run_study": ".study",
     "Lookup": ".rom",
