@@ -113,7 +113,9 @@ def test_dask_local_cluster(tmp_path):
     distributed = pytest.importorskip("distributed")
     p = write(tmp_path, GRID.format(sleep=0.0))
     serial = run_study(p, tmp_path / "a", workers=1, progress=False)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+    # worker processes: HDF5 is not thread-safe, and netCDF files written from worker threads of an
+    # in-process cluster are finalised after it shuts down ("IOLoop is closed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         ds = run_study(p, tmp_path / "b", scheduler=client, progress=False)
         # the address path (a Client made by the runner) resumes the same folder
