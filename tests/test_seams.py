@@ -126,6 +126,8 @@ def test_bad_seam_distance_and_options(cell):
         homtex.seam_profile(cell, seam_distance=-1.0)
     with pytest.raises(InputError, match="seam_distance"):
         homtex.seam_profile(cell, seam_distance="wide")
+    with pytest.raises(InputError, match="seam_distance 1 mm is less than half the fabric repeat"):
+        homtex.seam_profile(cell, seam_distance=1.0)
     with pytest.raises(InputError, match="prestrain"):
         homtex.seam_profile(cell, seam_distance=24.0, prestrain=1.5)
     with pytest.raises(InputError, match="method"):

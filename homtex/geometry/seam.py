@@ -75,6 +75,9 @@ def seam_tiling(cell, seam_distance: float, stitch_length: float, *, stitches: i
         raise InputError(f"stitches must be a positive integer, got {stitches!r}")
     wales = cell.info.get("repeat", (1, 1))[0]
     q = d / Lx
+    if q < 0.5:
+        raise InputError(f"seam_distance {d:g} mm is less than half the fabric repeat across the wales "
+                         f"({Lx:.6g} mm): a seam cell needs at least one repeat")
     n_x = max(1, int(round(q)))
     if exact and abs(q - round(q)) > 1e-6:
         raise InputError(f"seam_distance {d:g} mm is not a multiple of the fabric repeat across the wales "
