@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from numba import njit, prange
 
 from .errors import SolverError
-from .solvers import SolveReport, _blas_single
+from .solvers import SolveReport, _blas_single, convergence_error
 
 _CHUNK = 256  # block rows per parallel task
 
@@ -615,18 +615,5 @@ def _solve_groups(lin, B, names, vcycle, X, hists, rn, nb):
 
 def _judge(rep: SolveReport, tol: float, name: str) -> None:
     """Raise SolverError when a column missed 10 tol (the rule of LinearSolver.solve)."""
-    if rep.residual <= tol * 10:
-        return
-    h = rep.history
-    msg = (f"amg did not converge for {name}: true relative residual {rep.residual:.3e} > "
-           f"tolerance {tol:.1e} after {rep.iterations} iterations")
-    if h and h[-1] <= tol:
-        msg += ("; the CG recurrence reached the tolerance but the true residual did not "
-                "follow after restarts: the system is too ill-conditioned for this "
-                "tolerance (loosen tol or use solver='direct')")
-    elif len(h) > 50:
-        drop = h[-51] / max(h[-1], 1e-300)
-        msg += (f"; stalled: the last 50 iterations reduced the residual "
-                f"by a factor of only {drop:.3g}" if drop < 10 else
-                f"; the residual still falls (x{drop:.3g} per 50 iterations): raise maxiter")
-    raise SolverError(msg, history=h, report=rep)
+    if rep.residual > tol * 10:
+        raise convergence_error(rep, tol, f"amg for {name}")

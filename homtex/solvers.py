@@ -306,19 +306,7 @@ class LinearSolver:
         rep.residual = float(np.linalg.norm(r) / nb)
         limit = self.tol * 10 if self.method != "direct" else max(self.tol, 1e-8)
         if rep.residual > limit:
-            h = rep.history
-            msg = (f"{rep.method} did not converge: true relative residual {rep.residual:.3e} > "
-                   f"tolerance {self.tol:.1e} after {rep.iterations} iterations")
-            if h and h[-1] <= self.tol:
-                msg += ("; the CG recurrence reached the tolerance but the true residual did not "
-                        "follow after restarts: the system is too ill-conditioned for this "
-                        "tolerance (loosen tol or use solver='direct')")
-            elif len(h) > 50:
-                drop = h[-51] / max(h[-1], 1e-300)
-                msg += (f"; stalled: the last 50 iterations reduced the residual "
-                        f"by a factor of only {drop:.3g}" if drop < 10 else
-                        f"; the residual still falls (x{drop:.3g} per 50 iterations): raise maxiter")
-            raise SolverError(msg, history=h, report=rep)
+            raise convergence_error(rep, self.tol, rep.method)
         return x, rep
 
 
@@ -334,6 +322,24 @@ class LinearSolver:
         with _blas_single():
             dx = self.factor(r) if self.backend == "cholmod" else self.factor.solve(r)
         return x + dx, float(np.linalg.norm(dx) / max(np.linalg.norm(x), 1e-300))
+
+
+def convergence_error(rep: SolveReport, tol: float, label: str) -> SolverError:
+    """The SolverError for a solve that missed ``tol``: residual, iterations and, from the
+    residual history, whether it stalled, still falls, or is too ill-conditioned."""
+    h = rep.history
+    msg = (f"{label} did not converge: true relative residual {rep.residual:.3e} > "
+           f"tolerance {tol:.1e} after {rep.iterations} iterations")
+    if h and h[-1] <= tol:
+        msg += ("; the CG recurrence reached the tolerance but the true residual did not "
+                "follow after restarts: the system is too ill-conditioned for this "
+                "tolerance (loosen tol or use solver='direct')")
+    elif len(h) > 50:
+        drop = h[-51] / max(h[-1], 1e-300)
+        msg += (f"; stalled: the last 50 iterations reduced the residual "
+                f"by a factor of only {drop:.3g}" if drop < 10 else
+                f"; the residual still falls (x{drop:.3g} per 50 iterations): raise maxiter")
+    return SolverError(msg, history=h, report=rep)
 
 
 def solve(A, b, *, method="amg", B=None, tol=1e-10, maxiter=None):

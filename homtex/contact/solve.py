@@ -644,14 +644,20 @@ class ContactSolver:
                     f"error {viol:.3e} mm at {self._name(rows, q)}, tolerance {self.gtol:.1e} mm; penalty "
                     f"{k:.3g} N/mm); the contact is held rigidly or the constraints contradict each other")
         if cont.enforcement == "penalty":
-            pen = float(np.maximum(-h[active], 0.0).max(initial=0.0))
-            if pen > cont.max_penetration * self.r_min:
-                q = int(np.flatnonzero(active)[np.argmin(h[active])])
-                raise SolverError(f"penalty too soft: penetration {pen:.3e} mm at {self._name(rows, q)} exceeds "
-                                  f"max_penetration = {cont.max_penetration} x contact radius {self.r_min:.3g} mm "
-                                  f"(penalty {self.k:.3g} N/mm); raise 'penalty' or use enforcement='augmented'")
+            self._check_penetration(rows, h, active)
         active = lam > 0.0
         return x, lam, h, active, iters, outer
+
+    def _check_penetration(self, rows, h, active):
+        """Penalty enforcement: raise when an active contact overlaps by more than
+        max_penetration x the smallest contact radius."""
+        cont = self.contact
+        pen = float(np.maximum(-h[active], 0.0).max(initial=0.0))
+        if pen > cont.max_penetration * self.r_min:
+            q = int(np.flatnonzero(active)[np.argmin(h[active])])
+            raise SolverError(f"penalty too soft: penetration {pen:.3e} mm at {self._name(rows, q)} exceeds "
+                              f"max_penetration = {cont.max_penetration} x contact radius {self.r_min:.3g} mm "
+                              f"(penalty {self.k:.3g} N/mm); raise 'penalty' or use enforcement='augmented'")
 
     def _active_set_loop(self, rows, g, active, lam, x):
         cont = self.contact
@@ -701,12 +707,7 @@ class ContactSolver:
         else:
             raise SolverError(f"{cont.strategy}: the active set did not settle in {cont.max_iter} iterations")
         if cont.enforcement == "penalty":
-            pen = float(np.maximum(-h[active], 0.0).max(initial=0.0))
-            if pen > cont.max_penetration * self.r_min:
-                q = int(np.flatnonzero(active)[np.argmin(h[active])])
-                raise SolverError(f"penalty too soft: penetration {pen:.3e} mm at {self._name(rows, q)} exceeds "
-                                  f"max_penetration = {cont.max_penetration} x contact radius {self.r_min:.3g} mm "
-                                  f"(penalty {self.k:.3g} N/mm); raise 'penalty' or use enforcement='augmented'")
+            self._check_penetration(rows, h, active)
         return x, lam, h, active, it, updates
 
 
