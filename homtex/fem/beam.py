@@ -102,6 +102,53 @@ def local_stiffness(L, EA, GJ, EIy, EIz, kGA):
     return k
 
 
+@njit(cache=True, inline="always")
+def end_forces(d, ax, tor, a_y, b_y, c_y, d_y, a_z, b_z, c_z, d_z, pre):
+    """Local end forces (12,) of the linear element for local end displacements d (12,);
+    ``pre`` = EA eps0 is the pre-strain tension."""
+    f = np.empty(12)
+    N = ax * (d[6] - d[0]) + pre
+    T = tor * (d[9] - d[3])
+    dv = d[1] - d[7]
+    fv1 = a_y * dv + b_y * (d[5] + d[11])
+    fz1 = b_y * dv + c_y * d[5] + d_y * d[11]
+    fz2 = b_y * dv + d_y * d[5] + c_y * d[11]
+    dw = d[2] - d[8]
+    fw1 = a_z * dw - b_z * (d[4] + d[10])
+    fy1 = -b_z * dw + c_z * d[4] + d_z * d[10]
+    fy2 = -b_z * dw + d_z * d[4] + c_z * d[10]
+    f[0] = -N
+    f[1] = fv1
+    f[2] = fw1
+    f[3] = -T
+    f[4] = fy1
+    f[5] = fz1
+    f[6] = N
+    f[7] = -fv1
+    f[8] = -fw1
+    f[9] = T
+    f[10] = fy2
+    f[11] = fz2
+    return f
+
+
+@njit(cache=True, inline="always")
+def end_energy(f, Le, EA, GJ, EIy, EIz, kGA, out):
+    """Strain-energy split (axial, torsion, bending_y, bending_z, shear) of local end forces f."""
+    N = f[6]
+    T = f[9]
+    out[0] = 0.5 * N * N * Le / EA
+    out[1] = 0.5 * T * T * Le / GJ
+    # internal moment varies linearly from -f(end 1) to +f(end 2)
+    m0 = -f[4]
+    m1 = f[10]
+    out[2] = Le / (6.0 * EIy) * (m0 * m0 + m0 * m1 + m1 * m1)
+    m0 = -f[5]
+    m1 = f[11]
+    out[3] = Le / (6.0 * EIz) * (m0 * m0 + m0 * m1 + m1 * m1)
+    out[4] = 0.5 * (f[1] * f[1] + f[2] * f[2]) * Le / kGA
+
+
 @njit(cache=True, parallel=True)
 def element_response(u, elements, jump, R, L, EA, GJ, EIy, EIz, kGA, eps0, forces, energy):
     """Local end forces and the strain-energy split of every element.
@@ -137,42 +184,9 @@ def element_response(u, elements, jump, R, L, EA, GJ, EIy, EIz, kGA, eps0, force
             d[9 + a] = s3
         ax, tor, a_y, b_y, c_y, d_y, a_z, b_z, c_z, d_z = coefficients(
             L[e], EA[e], GJ[e], EIy[e], EIz[e], kGA[e])
-        N = ax * (d[6] - d[0]) + EA[e] * eps0[e]
-        T = tor * (d[9] - d[3])
-        # e1-e2 plane
-        dv = d[1] - d[7]
-        fv1 = a_y * dv + b_y * (d[5] + d[11])
-        fz1 = b_y * dv + c_y * d[5] + d_y * d[11]
-        fz2 = b_y * dv + d_y * d[5] + c_y * d[11]
-        # e1-e3 plane
-        dw = d[2] - d[8]
-        fw1 = a_z * dw - b_z * (d[4] + d[10])
-        fy1 = -b_z * dw + c_z * d[4] + d_z * d[10]
-        fy2 = -b_z * dw + d_z * d[4] + c_z * d[10]
-        f = forces[e]
-        f[0] = -N
-        f[1] = fv1
-        f[2] = fw1
-        f[3] = -T
-        f[4] = fy1
-        f[5] = fz1
-        f[6] = N
-        f[7] = -fv1
-        f[8] = -fw1
-        f[9] = T
-        f[10] = fy2
-        f[11] = fz2
-        Le = L[e]
-        energy[e, 0] = 0.5 * N * N * Le / EA[e]
-        energy[e, 1] = 0.5 * T * T * Le / GJ[e]
-        # internal moment varies linearly from -f(end 1) to +f(end 2)
-        m0 = -fy1
-        m1 = fy2
-        energy[e, 2] = Le / (6.0 * EIy[e]) * (m0 * m0 + m0 * m1 + m1 * m1)
-        m0 = -fz1
-        m1 = fz2
-        energy[e, 3] = Le / (6.0 * EIz[e]) * (m0 * m0 + m0 * m1 + m1 * m1)
-        energy[e, 4] = 0.5 * (fv1 * fv1 + fw1 * fw1) * Le / kGA[e]
+        f = end_forces(d, ax, tor, a_y, b_y, c_y, d_y, a_z, b_z, c_z, d_z, EA[e] * eps0[e])
+        forces[e] = f
+        end_energy(f, L[e], EA[e], GJ[e], EIy[e], EIz[e], kGA[e], energy[e])
 
 
 @njit(cache=True, parallel=True)
