@@ -54,6 +54,8 @@ import numpy as np
 
 from .errors import InputError
 
+GEOMETRIES = ("linear", "nonlinear")
+
 #: default contact options used to measure the fabric modulus for the foundation
 _N_IMAGES = 30
 
@@ -288,7 +290,7 @@ class SeamSolver:
     the fabric find their own relative height).
     """
 
-    def __init__(self, frame, info, *, contact=None, plates=(), solver: str = "direct"):
+    def __init__(self, frame, info, *, contact=None, plates=(), solver: str = "direct", geometry: str = "linear"):
         from .contact.compress import _default_fixed
         from .contact.solve import ContactSolver
         from .static import prestrain_load
@@ -306,6 +308,15 @@ class SeamSolver:
         self.contact = _default_contact() if contact is None else contact
         self.cs = ContactSolver(frame, fix, None, self.contact, plates=list(plates), solver=solver)
         self.f_pre = prestrain_load(frame)
+        if geometry not in GEOMETRIES:
+            raise InputError(f"geometry must be one of {GEOMETRIES}, got {geometry!r}")
+        self.geometry = geometry
+        self.cor = None
+        self.plate_u = None
+        if geometry == "nonlinear":
+            from .nonlinear import Corotational
+
+            self.cor = Corotational(frame, self.cs.assembler)
         self.alpha = 0.0
         self.u_ref = None
         self.warm = None
@@ -319,14 +330,25 @@ class SeamSolver:
         from .errors import SolverError
 
         n = self.frame.n_nodes
-        self.cs.f[:6 * n] = alpha * self.f_pre
+        if self.cor is not None:
+            from .contact.nonlinear import newton_contact
+
+            def run(warm):
+                res, pu, _ = newton_contact(self.cs, self.cor, prestrain_scale=alpha, plate_u=self.plate_u,
+                                            warm_keys=warm)
+                self.plate_u = pu
+                return res
+        else:
+            def run(warm):
+                self.cs.f[:6 * n] = alpha * self.f_pre
+                return self.cs.solve(u_ref=self.u_ref, warm_keys=warm)
         try:
-            return self.cs.solve(u_ref=self.u_ref, warm_keys=self.warm)
+            return run(self.warm)
         except SolverError:
             if self.warm is None:
                 raise
             self.retries += 1
-            return self.cs.solve(u_ref=self.u_ref, warm_keys=None)
+            return run(None)
 
     def _accept(self, res, alpha):
         self.alpha = alpha
@@ -362,7 +384,7 @@ class SeamSolver:
 
 def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, steps: int = 4,
                  stitches: int = 1, exact: bool = False, contact=None, elements_per_mm: float | None = None,
-                 leg_elements: int | None = None, max_cuts: int = 4):
+                 leg_elements: int | None = None, max_cuts: int = 4, geometry: str = "linear"):
     """Cushion profile from the yarn-level seam cell (``seam_profile(method="yarn")``).
 
     Parameters
@@ -376,6 +398,8 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
         in a row). The contact geometry is re-linearised per step, so the answer depends somewhat on
         the steps (see the report); compare cells on the same step path.
     stitches : stitches along y in the cell (2: a 2-stitch supercell, same answer expected).
+    geometry : "linear" (small rotations) or "nonlinear" (co-rotational beams, Newton iterations
+        per load step: the pile yarns may tilt and buckle under the stitch).
 
     Returns
     -------
@@ -409,7 +433,7 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
         from .errors import SolverError
 
         try:
-            ss = SeamSolver(frame, info, contact=contact)
+            ss = SeamSolver(frame, info, contact=contact, geometry=geometry)
             hist = ss.ramp(steps, max_cuts=max_cuts)
             res = ss.result
             u = res.u
@@ -434,7 +458,8 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
     ds.attrs.update(
         model="yarn", method="yarn", status=status,
         description="yarn-level seam cell (lock stitch 301, pre-strained stitch yarn, yarn-yarn contact; "
-                    "geometrically linear beams, contact re-linearised per load step)",
+        + ("co-rotational beams, Newton iterations per load step)" if geometry == "nonlinear" else
+           "geometrically linear beams, contact re-linearised per load step)"), geometry=geometry,
         requested_seam_distance_mm=float(info["requested_seam_distance"]), effective_seam_distance_mm=d_eff,
         stitch_length_mm=float(info["stitch_length"]), stitches=int(stitches), thickness_mm=float(info["thickness"]),
         n_nodes=int(frame.n_nodes), n_elements=int(frame.n_elements), repeats_x=int(info["n_x"]),

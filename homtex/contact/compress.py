@@ -75,7 +75,7 @@ def _default_fixed(frame, x):
 def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "displacement",
              contact: Contact | None = None, pressure=None, fixed=None, thickness: float | None = None,
              area: float | None = None, solver: str = "direct", tol: float = 1e-10,
-             maxiter: int | None = None, max_cuts: int = 4, progress: bool = False):
+             maxiter: int | None = None, max_cuts: int = 4, progress: bool = False, geometry: str = "linear"):
     """Compression curve of a cell between two rigid frictionless plates.
 
     Parameters
@@ -101,6 +101,9 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
         1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
     progress : show a progress bar (rich if installed, else lines on stderr).
+    geometry : "linear" (small rotations; contact re-linearised per step) or "nonlinear"
+        (co-rotational beams, Newton iterations per step: yarns may rotate and buckle; the
+        large-compression regime the linear model does not reach).
 
     Returns
     -------
@@ -120,6 +123,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
     if int(steps) != steps or steps < 1:
         raise InputError(f"steps must be a positive integer, got {steps!r}")
+    if geometry not in ("linear", "nonlinear"):
+        raise InputError(f"geometry must be 'linear' or 'nonlinear', got {geometry!r}")
     if frame.dim_periodic == 3:
         raise InputError("compress: a 3-periodic frame has no free surfaces for plates")
     if frame.dim_periodic and np.any(np.abs(frame.periods[:, 2]) > 1e-9 * np.abs(frame.periods).max()):
@@ -186,12 +191,29 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         else:
             cs.set_plate(1, force=value * area * 1e-3)
 
+    cor = None
+    plate_u = {"u": None}
+    if geometry == "nonlinear":
+        from ..nonlinear import Corotational
+        from .nonlinear import newton_contact
+
+        cor = Corotational(frame, cs.assembler)
+
+    def solve_from(u0, w0):
+        if cor is None:
+            return cs.solve(u_ref=u0, warm_keys=w0)
+        # the co-rotational state (cor, plate_u) is the previous converged one; a failed Newton
+        # solve restores it, so a halved step starts from there too
+        res, pu, _ = newton_contact(cs, cor, plate_u=plate_u["u"], warm_keys=w0)
+        plate_u["u"] = pu
+        return res
+
     def advance(a, b, u0, w0, cuts):
         """Solve at load level b from the converged state at a; halve the step on failure.
         Returns (result, number of sub-steps used); raises the first failure's error."""
         apply(b)
         try:
-            return cs.solve(u_ref=u0, warm_keys=w0), 1
+            return solve_from(u0, w0), 1
         except (SolverError, np.linalg.LinAlgError) as err:
             if cuts == 0 or "singular" in str(err):   # a singular operator does not improve
                 raise
@@ -253,7 +275,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     return _dataset(xr, rec, names, status, dict(
         control=control, thickness_mm=H0, area_mm2=area, area_source=area_source,
         strategy=contact.strategy, enforcement=contact.enforcement, penalty_N_per_mm=cs.k,
-        bottom_plate_z_mm=z_lo, top_plate_z_mm=z_lo + H0, solver=solver, seconds=seconds,
+        bottom_plate_z_mm=z_lo, top_plate_z_mm=z_lo + H0, solver=solver, seconds=seconds, geometry=geometry,
         supports=str(fix), steps_requested=int(len(targets)), initial_overlap=contact.initial_overlap,
         initial_overlaps=int(cs.initial_overlaps), initial_overlap_max_mm=cs.initial_overlap_max))
 

@@ -167,8 +167,10 @@ class ContactSolver:
         self.frame_mask = mask
         self.mask = np.concatenate([mask, np.ones(6 * P, dtype=bool)])
         self.up = np.concatenate([up, np.zeros(6 * P)])
-        self.f = np.concatenate([parse_loads(loads, n) + _prestrain_load(frame), np.zeros(6 * P)])
+        self.f_loads = parse_loads(loads, n)
+        self.f = np.concatenate([self.f_loads + _prestrain_load(frame), np.zeros(6 * P)])
         asm = assembler or Assembler(frame)
+        self.assembler = asm
         K = asm.stiffness().tocsr()
         self.K = K
         self.K_ext = sp.block_diag([K, sp.csr_matrix((6 * P, 6 * P))], format="csr") if P else K.copy()
@@ -214,6 +216,14 @@ class ContactSolver:
             self.offset_keys, self.offset_vals = keys[order], -g0[ov][order]
         self.initial_overlaps = len(self.offset_keys)
         self.initial_overlap_max = float(self.offset_vals.max(initial=0.0))
+
+    def set_stiffness(self, K):
+        """Replace the frame's stiffness (e.g. the co-rotational tangent; same DOFs). The contact
+        penalty keeps its scale from the first stiffness; a reused AMG hierarchy is dropped."""
+        K = K.tocsr()
+        self.K = K
+        self.K_ext = sp.block_diag([K, sp.csr_matrix((6 * self.P, 6 * self.P))], format="csr") if self.P else K.copy()
+        self._ml = None
 
     def _offset(self, keys):
         """(len(keys),) gap offset of each candidate (initial overlap treated as touching), mm."""
@@ -552,7 +562,7 @@ class ContactSolver:
             "contact_energy": float(0.5 * np.dot(lam, pen)), "max_penetration": float(pen.max(initial=0.0)),
             "penalty": self.k, "linear": st, "plate_u": u[n:].copy(), "u_ext": u,
             "active_keys": rows.keys[active], "initial_overlaps": self.initial_overlaps,
-            "initial_overlap_max": self.initial_overlap_max,
+            "initial_overlap_max": self.initial_overlap_max, "contact_force": fc,
         }
         res = StaticResult(frame=frame, u=ufr, report=self._last_rep, forces=forces,
                            energy=dict(zip(ENERGY_KEYS, energy.T.copy())), reactions=reactions,

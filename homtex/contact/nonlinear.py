@@ -1,0 +1,96 @@
+"""Contact with large rotations: Newton's method whose every step is a contact solve.
+
+At the current state (translations u_k, nodal rotations Q_k) the co-rotational frame gives its
+internal forces f_int and tangent K_t (:class:`homtex.nonlinear.Corotational`); the step du solves
+the contact problem of the linearised frame
+
+    min 1/2 du K_t du - (f_ext - f_int) du   subject to   g(u_k) + C(u_k) du >= 0,
+
+i.e. :class:`~homtex.contact.solve.ContactSolver` with K = K_t, loads f_ext - f_int + K_t u_ref and the
+contact rows re-detected and rebuilt at u_k. Steps repeat until the increment is below ``tol``
+(relative to the mean element length; rotations in rad): the final state is in equilibrium with
+the contact forces of the final active set, the contact gaps are those of the current geometry.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import SolverError
+
+
+def newton_contact(cs, cor, *, prestrain_scale: float = 1.0, plate_u=None, warm_keys=None, tol: float = 1e-6,
+                   max_iter: int = 40):
+    """Contact equilibrium of a co-rotational frame.
+
+    Parameters
+    ----------
+    cs : ContactSolver of the frame (supports, plates, contact options; its stiffness is
+        replaced by the tangent at every step). Loads: ``cs.f_loads`` (dead loads) and the
+        plates' forces as set by ``cs.set_plate``.
+    cor : Corotational state; updated in place on success, restored on failure.
+    prestrain_scale : factor on the frame's pre-strain (ramps of the stitch tension).
+    plate_u : (P, 6) current plate displacements (default zeros); the prescribed ones are
+        taken from the plates.
+    warm_keys : contact keys active at the previous state (warm start of the active set).
+    tol : increment tolerance (max |du| / mean element length and max |d theta| in rad).
+
+    Returns
+    -------
+    (result, plate_u, iterations): the last contact solve's StaticResult with ``u`` (n, 6)
+    (translations, rotation vectors), ``forces`` and ``energy`` of the co-rotational state.
+    """
+    from ..static import ENERGY_KEYS
+
+    n, N, P = cs.n, cs.N, cs.P
+    frame = cs.frame
+    state = cor.copy_state()
+    pu = np.zeros((P, 6)) if plate_u is None else np.array(plate_u, dtype=float).reshape(P, 6)
+    f_plate = cs.f[6 * n:].copy()                 # plate loads (force control), never touched by K
+    length = float(frame.length.mean())
+    hist = []
+    res = None
+    try:
+        for it in range(1, int(max_iter) + 1):
+            fint = cor.evaluate(prestrain_scale)
+            cs.set_stiffness(cor.tangent())
+            u_ref = np.zeros((N, 6))
+            u_ref[:n, :3] = cor.ut
+            u_ref[n:] = pu
+            ur = u_ref.ravel()
+            cs.f = np.concatenate([cs.f_loads - fint.ravel(), f_plate]) + cs.K_ext @ ur
+            res = cs.solve(u_ref=u_ref, warm_keys=warm_keys)
+            du = res.extra["u_ext"] - u_ref
+            if not np.all(np.isfinite(du)):
+                raise SolverError(f"Newton step {it} is not finite")
+            cor.update(du[:n])
+            pu = res.extra["u_ext"][n:].copy()
+            warm_keys = res.extra["active_keys"]
+            size = max(float(np.abs(du[:n, :3]).max(initial=0.0)) / length,
+                       float(np.abs(du[n:, 2]).max(initial=0.0)) / length,
+                       float(np.abs(du[:n, 3:]).max(initial=0.0)))
+            hist.append(size)
+            if size <= tol:
+                break
+            if it >= 10 and size > 0.9 * hist[-6]:
+                raise SolverError(f"Newton iterations stall: increment {size:.2e} after {it} steps "
+                                  f"(history {', '.join(f'{h:.1e}' for h in hist[-4:])}); a smaller load step "
+                                  "is needed or the active set alternates")
+        else:
+            raise SolverError(f"Newton iterations did not converge in {max_iter} steps (last increment {hist[-1]:.2e}, "
+                              f"tolerance {tol:g})")
+    except (SolverError, np.linalg.LinAlgError):
+        cor.set_state(state)
+        raise
+    cor.evaluate(prestrain_scale)
+    res.u = cor.u()
+    res.forces = cor.forces.copy()
+    res.energy = dict(zip(ENERGY_KEYS, cor.energy.T.copy()))
+    # support reactions: internal minus applied minus contact forces on the held DOFs
+    r = np.concatenate([cor.fint.ravel() - cs.f_loads, -f_plate]) - res.extra["contact_force"]
+    res.reactions = np.where(cs.mask, r, 0.0)[:6 * n].reshape(n, 6)
+    ue = res.extra["u_ext"].copy()
+    ue[:n] = res.u
+    res.extra.update(u_ext=ue, newton_iterations=it, newton_history=hist,
+                     max_deformational_rotation=cor.max_deformational_rotation())
+    return res, pu, it
