@@ -290,7 +290,8 @@ class SeamSolver:
     the fabric find their own relative height).
     """
 
-    def __init__(self, frame, info, *, contact=None, plates=(), solver: str = "direct", geometry: str = "linear"):
+    def __init__(self, frame, info, *, contact=None, plates=(), solver: str = "direct", geometry: str = "linear",
+                 stabilize: float = 0.0):
         from .contact.compress import _default_fixed
         from .contact.solve import ContactSolver
         from .static import prestrain_load
@@ -311,6 +312,7 @@ class SeamSolver:
         if geometry not in GEOMETRIES:
             raise InputError(f"geometry must be one of {GEOMETRIES}, got {geometry!r}")
         self.geometry = geometry
+        self.stabilize = float(stabilize)
         self.cor = None
         self.plate_u = None
         if geometry == "nonlinear":
@@ -335,7 +337,7 @@ class SeamSolver:
 
             def run(warm):
                 res, pu, _ = newton_contact(self.cs, self.cor, prestrain_scale=alpha, plate_u=self.plate_u,
-                                            warm_keys=warm)
+                                            warm_keys=warm, stabilize=self.stabilize)
                 self.plate_u = pu
                 return res
         else:
@@ -384,7 +386,8 @@ class SeamSolver:
 
 def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, steps: int = 4,
                  stitches: int = 1, exact: bool = False, contact=None, elements_per_mm: float | None = None,
-                 leg_elements: int | None = None, max_cuts: int = 4, geometry: str = "linear"):
+                 leg_elements: int | None = None, max_cuts: int = 4, geometry: str = "linear",
+                 stabilize: float = 0.0):
     """Cushion profile from the yarn-level seam cell (``seam_profile(method="yarn")``).
 
     Parameters
@@ -399,7 +402,8 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
         the steps (see the report); compare cells on the same step path.
     stitches : stitches along y in the cell (2: a 2-stitch supercell, same answer expected).
     geometry : "linear" (small rotations) or "nonlinear" (co-rotational beams, Newton iterations
-        per load step: the pile yarns may tilt and buckle under the stitch).
+        per load step: the pile yarns may tilt and buckle under the stitch); ``stabilize``: viscous
+        stabilisation of the nonlinear steps (:func:`homtex.contact.nonlinear.newton_contact`).
 
     Returns
     -------
@@ -433,7 +437,7 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
         from .errors import SolverError
 
         try:
-            ss = SeamSolver(frame, info, contact=contact, geometry=geometry)
+            ss = SeamSolver(frame, info, contact=contact, geometry=geometry, stabilize=stabilize)
             hist = ss.ramp(steps, max_cuts=max_cuts)
             res = ss.result
             u = res.u

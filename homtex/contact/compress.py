@@ -75,7 +75,8 @@ def _default_fixed(frame, x):
 def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "displacement",
              contact: Contact | None = None, pressure=None, fixed=None, thickness: float | None = None,
              area: float | None = None, solver: str = "direct", tol: float = 1e-10,
-             maxiter: int | None = None, max_cuts: int = 4, progress: bool = False, geometry: str = "linear"):
+             maxiter: int | None = None, max_cuts: int = 4, progress: bool = False, geometry: str = "linear",
+             stabilize: float = 0.0):
     """Compression curve of a cell between two rigid frictionless plates.
 
     Parameters
@@ -104,6 +105,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     geometry : "linear" (small rotations; contact re-linearised per step) or "nonlinear"
         (co-rotational beams, Newton iterations per step: yarns may rotate and buckle; the
         large-compression regime the linear model does not reach).
+    stabilize : viscous stabilisation of the nonlinear steps (see
+        :func:`homtex.contact.nonlinear.newton_contact`); its largest force is recorded per step.
 
     Returns
     -------
@@ -125,6 +128,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         raise InputError(f"steps must be a positive integer, got {steps!r}")
     if geometry not in ("linear", "nonlinear"):
         raise InputError(f"geometry must be 'linear' or 'nonlinear', got {geometry!r}")
+    if not (np.isfinite(stabilize) and 0.0 <= stabilize < 1.0):
+        raise InputError(f"stabilize must lie in [0, 1) (fraction of the diagonal stiffness), got {stabilize!r}")
     if frame.dim_periodic == 3:
         raise InputError("compress: a 3-periodic frame has no free surfaces for plates")
     if frame.dim_periodic and np.any(np.abs(frame.periods[:, 2]) > 1e-9 * np.abs(frame.periods).max()):
@@ -177,7 +182,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
             raise InputError(f"group {g!r}: mask must have shape ({frame.n_elements},), got {mk.shape}")
     rec = {k: [] for k in ("strain", "stress", "force", "plate_displacement", "active_contacts",
                            "active_yarn_yarn", "active_yarn_plate", "max_penetration", "contact_iterations",
-                           "linear_solves", "contact_energy", "bottom_force", "pressure", *ENERGY_NAMES)}
+                           "linear_solves", "contact_energy", "bottom_force", "pressure", "newton_iterations",
+                           "stabilization_force", *ENERGY_NAMES)}
     rec["group_energy"] = []
     status = "ok"
     u_ref = None
@@ -204,7 +210,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
             return cs.solve(u_ref=u0, warm_keys=w0)
         # the co-rotational state (cor, plate_u) is the previous converged one; a failed Newton
         # solve restores it, so a halved step starts from there too
-        res, pu, _ = newton_contact(cs, cor, plate_u=plate_u["u"], warm_keys=w0)
+        res, pu, _ = newton_contact(cs, cor, plate_u=plate_u["u"], warm_keys=w0, stabilize=stabilize)
         plate_u["u"] = pu
         return res
 
@@ -265,6 +271,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         rec["contact_iterations"].append(e["contact_iterations"])
         rec["linear_solves"].append(e["linear"]["linear_solves"])
         rec["contact_energy"].append(e["contact_energy"])
+        rec["newton_iterations"].append(int(e.get("newton_iterations", 0)))
+        rec["stabilization_force"].append(float(e.get("stabilization_force", 0.0)))
         tot = np.zeros(frame.n_elements)
         for k in ENERGY_NAMES:
             rec[k].append(float(res.energy[k].sum()))
@@ -276,7 +284,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         control=control, thickness_mm=H0, area_mm2=area, area_source=area_source,
         strategy=contact.strategy, enforcement=contact.enforcement, penalty_N_per_mm=cs.k,
         bottom_plate_z_mm=z_lo, top_plate_z_mm=z_lo + H0, solver=solver, seconds=seconds, geometry=geometry,
-        supports=str(fix), steps_requested=int(len(targets)), initial_overlap=contact.initial_overlap,
+        supports=str(fix), steps_requested=int(len(targets)), stabilize=float(stabilize), initial_overlap=contact.initial_overlap,
         initial_overlaps=int(cs.initial_overlaps), initial_overlap_max_mm=cs.initial_overlap_max))
 
 
@@ -306,6 +314,8 @@ def _dataset(xr, rec, groups, status, attrs):
         "linear_solves": ("1", "linear solves of the step (last sub-step)"),
         "substeps": ("1", "sub-steps the step needed (1: none; more after halving a failed step)"),
         "contact_energy": ("N mm", "energy stored in the contact penalty springs"),
+        "newton_iterations": ("1", "Newton iterations of the step (geometry='nonlinear'; 0: linear)"),
+        "stabilization_force": ("N", "largest viscous stabilisation force on a node (geometry='nonlinear')"),
         "axial": ("N mm", "axial strain energy"),
         "torsion": ("N mm", "torsional strain energy"),
         "bending_y": ("N mm", "bending strain energy about local y"),

@@ -434,8 +434,12 @@ class ContactSolver:
         return f"yarn-plate contact node {int(rows.pnode[q])} / plate {int(rows.pidx[q])}"
 
     # ------------------------------------------------------------------
-    def solve(self, u_ref=None, warm_keys=None):
+    def solve(self, u_ref=None, warm_keys=None, warm_forces=None):
         """Contact equilibrium linearised about ``u_ref`` (N, 6) (default 0).
+
+        ``warm_keys`` (contact keys active before) start the active set; ``warm_forces`` (same
+        length) also start their multipliers (N): Newton steps near convergence move contacts by
+        round-off, and a cold multiplier would then let a loaded contact open.
 
         Returns a :class:`~homtex.static.StaticResult` with ``.contacts`` and ``extra``
         (iterations, linear solves, timings, plate forces and displacements, contact energy).
@@ -483,6 +487,12 @@ class ContactSolver:
                     except SolverError:
                         active = np.ones(rows.M, dtype=bool)
                 lam = np.zeros(rows.M)
+                if warm_keys is not None and warm_forces is not None and len(warm_keys):
+                    wk = np.asarray(warm_keys)
+                    order = np.argsort(wk)
+                    pos = np.minimum(np.searchsorted(wk[order], rows.keys), len(wk) - 1)
+                    hit = wk[order][pos] == rows.keys
+                    lam[hit] = np.asarray(warm_forces, dtype=float)[order][pos[hit]]
             else:
                 old = np.isin(rows.keys, prev_keys[prev_active])
                 lam_new = np.zeros(rows.M)
@@ -561,7 +571,7 @@ class ContactSolver:
             "plate_displacement": u[n:, 2].copy(), "plate_force": contacts.plate_forces(),
             "contact_energy": float(0.5 * np.dot(lam, pen)), "max_penetration": float(pen.max(initial=0.0)),
             "penalty": self.k, "linear": st, "plate_u": u[n:].copy(), "u_ext": u,
-            "active_keys": rows.keys[active], "initial_overlaps": self.initial_overlaps,
+            "active_keys": rows.keys[active], "active_forces": lam[active], "initial_overlaps": self.initial_overlaps,
             "initial_overlap_max": self.initial_overlap_max, "contact_force": fc,
         }
         res = StaticResult(frame=frame, u=ufr, report=self._last_rep, forces=forces,
