@@ -501,7 +501,7 @@ def seam_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
 
 
 def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, steps: int = 10,
-                     prestrain: float | None = None, contact=None, ramp_steps: int = 4):
+                     prestrain: float | None = None, contact=None, ramp_steps: int = 4, tension_only: bool = True):
     """Yarn-level compression of a seamed spacer fabric between two rigid plates (paper's Fig. 11).
 
     The seam cell (:func:`homtex.geometry.seam.seam_cell`) is first brought to its sewn state (the
@@ -518,6 +518,8 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
     strain : final compression (plate displacement / H0), 0 < strain < 1.
     steps : plate steps.
     prestrain : eps0 (None: ``[parameters.seam] prestrain``).
+    tension_only : the stitch thread cannot carry compression (default): elements that would be
+        shortened below their rest length go slack during the compression (see ``_SlackThreads``).
 
     Returns
     -------
@@ -561,7 +563,8 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
     ss = SeamSolver(frame, info, contact=contact, plates=[bottom, top])
     status = "ok"
     rec = {k: [] for k in ("strain", "plate_displacement", "force", "stress", "cushion_plate_contacts",
-                           "cushions_touched", "stitch_plate_contacts", "active_contacts")}
+                           "cushions_touched", "stitch_plate_contacts", "active_contacts",
+                           "slack_stitch_elements")}
     area = float(abs(np.cross(frame.periods[0], frame.periods[1])[2]))
     nf = int(info["fabric_nodes"])
     w = float(info["wale_spacing"])
@@ -589,6 +592,7 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
         ss.cs.set_plate(0, displacement=z_lo - bottom.z)
         d_top0 = z_hi - top.z
         ss.cs.set_plate(1, displacement=d_top0)
+        slack = _SlackThreads(frame, info, ss.cs)
         e_done = 0.0
         de = float(strain) / int(steps)
         cuts = 0
@@ -597,7 +601,7 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
             e = min(float(strain), e_done + de)
             ss.cs.set_plate(1, displacement=d_top0 - e * H0)
             try:
-                res = ss._solve(1.0)
+                res = slack.solve(ss) if tension_only else ss._solve(1.0)
             except (SolverError, np.linalg.LinAlgError) as err:
                 if cuts < 3:
                     cuts += 1
@@ -626,6 +630,7 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
             rec["cushions_touched"].append(len(bins))
             rec["stitch_plate_contacts"].append(int((pn >= nf).sum()))
             rec["active_contacts"].append(int(c.n_active))
+            rec["slack_stitch_elements"].append(int(slack.slack.sum()))
     except SolverError as err:
         status = f"failed in the seam pre-strain ramp: {err}"
     meta = {"strain": ("1", "compression strain (plate displacement / sewn thickness H0)"),
@@ -635,7 +640,8 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
             "cushion_plate_contacts": ("1", "active contacts between fabric nodes and the top plate"),
             "cushions_touched": ("1", "wale bins of the cushion that touch the top plate"),
             "stitch_plate_contacts": ("1", "active contacts between the needle thread and the top plate"),
-            "active_contacts": ("1", "active contacts (yarn-yarn and yarn-plate)")}
+            "active_contacts": ("1", "active contacts (yarn-yarn and yarn-plate)"),
+            "slack_stitch_elements": ("1", "stitch elements gone slack (tension-only thread)")}
     data = {k: ("strain", np.asarray(v, float), {"units": meta[k][0], "long_name": meta[k][1]})
             for k, v in rec.items() if k != "strain"}
     ds = xr.Dataset(data, coords={"strain": ("strain", np.asarray(rec["strain"], float),
@@ -644,5 +650,49 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
                     area_mm2=area, seam_distance_mm=float(info["seam_distance"]),
                     requested_seam_distance_mm=float(info["requested_seam_distance"]), prestrain=eps0,
                     cushion_height_mm=float(np.nanmax(h_sewn)), seam_height_mm=float(h_sewn[nb // 2]),
-                    seconds=time.perf_counter() - t0, n_nodes=int(frame.n_nodes))
+                    seconds=time.perf_counter() - t0, n_nodes=int(frame.n_nodes), tension_only=int(tension_only))
     return ds
+
+
+class _SlackThreads:
+    """Tension-only stitch thread for the linear seam cell: a stitch element whose axial force
+    would be compressive (shorter than its rest length (1 - eps0) L0) goes slack - its axial
+    stiffness drops by ``factor`` (it buckles; the thread's tiny bending stiffness stays) and so
+    does its pre-strain load - and the step is solved again until the slack set settles.
+    Without it the thread legs act as struts once the punch reaches the seam line."""
+
+    def __init__(self, frame, info, cs, factor: float = 1e-3):
+        self.frame, self.cs, self.factor = frame, cs, float(factor)
+        self.stitch = np.zeros(frame.n_elements, dtype=bool)
+        self.stitch[int(info["fabric_elements"]):] = True
+        self.slack = np.zeros(frame.n_elements, dtype=bool)
+        self.full = cs.assembler.element_arrays()
+
+    def _apply(self, ss):
+        from .static import prestrain_load
+
+        scale = np.where(self.slack, self.factor, 1.0)
+        R, L, EA, GJ, EIy, EIz, kGA = self.full
+        K = self.cs.assembler.stiffness((R, L, EA * scale, GJ, EIy, EIz, kGA))
+        self.cs.set_stiffness(K)
+        ss.f_pre = prestrain_load(self.frame.with_(prestrain=scale * self.frame.prestrain))
+
+    def solve(self, ss, max_rounds: int = 12):
+        from .errors import SolverError
+        from .static import element_state
+
+        seen = {self.slack.tobytes()}
+        for _ in range(max_rounds):
+            res = ss._solve(1.0)
+            N = element_state(self.frame, res.u)[0][:, 6]       # with the full properties
+            new = self.stitch & (N < 0.0)
+            if np.array_equal(new, self.slack):
+                res.forces[np.ix_(self.slack, [0, 6])] *= self.factor
+                res.energy["axial"][self.slack] *= self.factor ** 2
+                return res
+            if new.tobytes() in seen:
+                raise SolverError(f"tension-only stitch: the slack set cycles ({int(new.sum())} slack elements)")
+            seen.add(new.tobytes())
+            self.slack = new
+            self._apply(ss)
+        raise SolverError(f"tension-only stitch: the slack set did not settle in {max_rounds} rounds")

@@ -149,6 +149,23 @@ def test_seam_compression_small(cell):
     assert ds.attrs["thickness_mm"] > ds.attrs["seam_height_mm"]
 
 
+def test_tension_only_thread_only_softens_and_only_where_slack(cell):
+    """A thread that cannot push: identical to the beam thread while no stitch element is slack,
+    never stiffer afterwards, and the punch reaching the seam line makes legs go slack."""
+    from homtex.seams import seam_compression
+    kw = dict(seam_distance=8.5, strain=0.2, steps=4, prestrain=0.2, ramp_steps=2)
+    to = seam_compression(cell, tension_only=True, **kw)
+    beam = seam_compression(cell, tension_only=False, **kw)
+    assert to.attrs["status"] == "ok" and beam.attrs["status"] == "ok"
+    assert to.attrs["tension_only"] == 1 and int(beam.slack_stitch_elements.max()) == 0
+    n = min(len(to.strain), len(beam.strain))
+    f_to, f_b, slack = to.force.values[:n], beam.force.values[:n], to.slack_stitch_elements.values[:n]
+    taut = slack == 0
+    np.testing.assert_allclose(f_to[taut], f_b[taut], rtol=1e-9)
+    assert slack[-1] > 0
+    assert np.all(f_to[~taut] < f_b[~taut])
+
+
 # ---------------------------------------------------------------- foundation model (analytical)
 def test_foundation_calibrated_24mm(cell):
     from scipy.optimize import brentq

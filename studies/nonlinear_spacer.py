@@ -1,0 +1,167 @@
+"""Large rotations in the spacer cell: what co-rotational beams change, and what they do not.
+
+Three experiments, one Dataset each (netCDF) and one chart:
+
+1. ``unseamed``: compression of the unseamed cell with linear and with co-rotational beams
+   (viscous stabilisation at two factors, to show its bias), stress against strain, Newton
+   iterations, the largest stabilisation force against the plate force, run time.
+2. ``seam``: the d = 24 mm seam cell, stitch pre-strain ramped with co-rotational beams as far
+   as the solve goes; the linear cell at the same pre-strain for comparison (seam-line and
+   cushion heights, the profile).
+3. ``layer_rigidity``: the linear seam cell with the surface layers' Young's modulus (so their
+   bending rigidity) scaled by 1, 5, 15, 50: how far the seam dip spreads into the cushion.
+
+Usage: python studies/nonlinear_spacer.py [OUTDIR] [--strain 0.3] [--steps 60] [--quick]
+"""
+import argparse
+import time
+import warnings
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+
+import homtex  # noqa: E402
+from homtex.errors import SolverError  # noqa: E402
+from homtex.geometry.seam import seam_cell  # noqa: E402
+from homtex.io import write_netcdf  # noqa: E402
+from homtex.seams import SeamSolver, measure_profile  # noqa: E402
+
+warnings.simplefilter("ignore")   # creation overlaps are reported by the cell
+
+
+def unseamed(cell, strain, steps, factors):
+    curves, rows = [], []
+    for geometry, c in [("linear", 0.0)] + [("nonlinear", f) for f in factors]:
+        t = time.perf_counter()
+        ds = homtex.compress(cell, strain=strain, steps=steps, geometry=geometry, stabilize=c)
+        sec = time.perf_counter() - t
+        label = "linear" if geometry == "linear" else f"co-rotational, stabilise {c:g}"
+        ratio = (ds.stabilization_force / np.maximum(ds.force, 1e-300)).values
+        curves.append(ds[["stress", "newton_iterations"]].assign(stab_ratio=("strain", ratio)).expand_dims(model=[label]))
+        rows.append((label, sec, ds.attrs["status"], int(ds.attrs["steps_done"])))
+        print(f"  {label:36s} {sec:6.1f} s  steps {ds.attrs['steps_done']:3d}  {ds.attrs['status'][:90]}", flush=True)
+    out = xr.concat(curves, dim="model", join="outer")
+    out["stress"].attrs.update(units="kPa", long_name="nominal compressive stress")
+    out["newton_iterations"].attrs.update(units="1", long_name="Newton iterations of the step (0: linear)")
+    out["stab_ratio"].attrs.update(units="1", long_name="largest stabilisation force on a node / top plate force")
+    out["seconds"] = ("model", [r[1] for r in rows], {"units": "s", "long_name": "run time of the curve"})
+    out["status"] = ("model", [r[2] for r in rows], {"long_name": "'ok' or why the curve ended"})
+    out.attrs.update(experiment="unseamed compression, linear vs co-rotational beams", steps=int(steps))
+    return out
+
+
+def seam(cell, d, eps0, ramp_steps, stabilize):
+    fr, info = seam_cell(cell, seam_distance=d, prestrain=eps0)
+    ss = SeamSolver(fr, info, geometry="nonlinear", stabilize=stabilize)
+    t = time.perf_counter()
+    status = "ok"
+    try:
+        ss.ramp(ramp_steps, max_cuts=2)
+    except SolverError as err:
+        status = f"stopped: {err}"
+    sec = time.perf_counter() - t
+    alpha = float(ss.alpha)
+    if ss.result is None:
+        raise SystemExit(f"the co-rotational seam ramp failed at its first step: {status}")
+    x, h_nl = measure_profile(fr, info, ss.result.u)
+    reached = alpha * eps0
+    print(f"  co-rotational ramp reached eps0 = {reached:.4f} ({alpha:.3f} of {eps0}) in {sec:.1f} s: {status[:120]}",
+          flush=True)
+    lin = homtex.seam_profile(cell, seam_distance=d, prestrain=reached, steps=4)
+    ds = xr.Dataset(
+        {"height": (("model", "x"), np.vstack([h_nl, lin.height.values]),
+                    {"units": "mm", "long_name": "fabric height per wale bin"}),
+         "seam_height": ("model", [float(h_nl[np.argmin(np.abs(x))]), float(lin.seam_height)], {"units": "mm"}),
+         "cushion_height": ("model", [float(np.max(h_nl)), float(lin.cushion_height)], {"units": "mm"})},
+        coords={"model": ["co-rotational", "linear"], "x": ("x", x, {"units": "mm", "long_name": "position across the seam"})})
+    ds.attrs.update(experiment="seam cell, stitch pre-strain ramp", seam_distance_mm=float(info["seam_distance"]),
+                    target_prestrain=eps0, reached_prestrain=reached, status=status, seconds=sec,
+                    stabilize=stabilize, ramp_steps=int(ramp_steps), newton_iterations=int(sum(
+                        1 for _ in ss.history)))
+    return ds
+
+
+def layer_rigidity(d, eps0, factors):
+    rows = []
+    for f in factors:
+        cell = homtex.load_cell("spacer_20mm")
+        E = cell.frame.E.copy()
+        layer = np.zeros(len(E), dtype=bool)
+        for g, m in cell.groups.items():
+            if g != "pile":
+                layer |= np.asarray(m, dtype=bool)
+        E[layer] *= f
+        cell._frame = cell.frame.with_(E=E)       # a what-if: same geometry, stiffer layer yarns
+        ds = homtex.seam_profile(cell, seam_distance=d, prestrain=eps0, steps=4)
+        rows.append(ds.height.values)
+        x = ds.x.values
+        print(f"  layer E x{f:<4g}: seam {float(ds.seam_height):.2f} mm, mid-cushion "
+              f"{float(ds.height.values[np.argmax(np.abs(x))]):.2f} mm, max {float(ds.cushion_height):.2f} mm "
+              f"({ds.attrs['status'][:40]})", flush=True)
+    out = xr.Dataset({"height": (("layer_factor", "x"), np.vstack(rows), {"units": "mm", "long_name": "fabric height"})},
+                     coords={"layer_factor": ("layer_factor", np.asarray(factors, float),
+                                              {"units": "1", "long_name": "factor on the surface layers' Young's modulus"}),
+                             "x": ("x", x, {"units": "mm", "long_name": "position across the seam"})})
+    out.attrs.update(experiment="seam dip against the layers' bending rigidity (linear beams)", prestrain=eps0,
+                     seam_distance_mm=float(d))
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("out", nargs="?", default="results/nonlinear_spacer")
+    p.add_argument("--strain", type=float, default=0.3)
+    p.add_argument("--steps", type=int, default=60)
+    p.add_argument("--distance", type=float, default=24.0)
+    p.add_argument("--prestrain", type=float, default=0.3)
+    p.add_argument("--quick", action="store_true", help="short unseamed runs (strain 0.05, 10 steps)")
+    p.add_argument("--plot-only", action="store_true", help="redraw the chart from OUTDIR's netCDF files")
+    a = p.parse_args(argv)
+    if a.quick:
+        a.strain, a.steps = 0.05, 10
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    if a.plot_only:
+        un, se, lr = (xr.load_dataset(out / f) for f in ("unseamed.nc", "seam.nc", "layer_rigidity.nc"))
+    else:
+        cell = homtex.load_cell("spacer_20mm")
+        print("1. unseamed compression", flush=True)
+        un = unseamed(cell, a.strain, a.steps, (1e-6, 1e-7))
+        write_netcdf(un, out / "unseamed.nc")
+        print("2. seam cell with co-rotational beams", flush=True)
+        se = seam(cell, a.distance, a.prestrain, 40, 1e-7)
+        write_netcdf(se, out / "seam.nc")
+        print("3. layer rigidity", flush=True)
+        lr = layer_rigidity(a.distance, a.prestrain, (1.0, 5.0, 15.0, 50.0))
+        write_netcdf(lr, out / "layer_rigidity.nc")
+
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    for m in un.model.values:
+        s = un.stress.sel(model=m)
+        ax[0].plot(100 * un.strain, s, "o-" if m == "linear" else ".-", ms=3, label=f"{m} ({float(un.seconds.sel(model=m)):.0f} s)")
+    ax[0].set(xlabel="compression (%)", ylabel="stress (kPa)", title="unseamed cell: linear vs co-rotational beams")
+    ax[0].legend(fontsize=7)
+    for m in se.model.values:
+        ax[1].plot(se.x, se.height.sel(model=m), "o-", ms=3, label=m)
+    ax[1].set(xlabel="x across the seam (mm)", ylabel="height (mm)",
+              title=f"seam d = {se.attrs['seam_distance_mm']:.1f} mm, eps0 = {se.attrs['reached_prestrain']:.3f}")
+    ax[1].legend(fontsize=8)
+    for f in lr.layer_factor.values:
+        ax[2].plot(lr.x, lr.height.sel(layer_factor=f), "o-", ms=3, label=f"layers E x{f:g}")
+    ax[2].axhline(14.33, color="k", ls=":", lw=1, label="paper: cushion 14.33 mm")
+    ax[2].set(xlabel="x across the seam (mm)", ylabel="height (mm)",
+              title=f"linear seam cell, eps0 = {lr.attrs['prestrain']}: layer stiffness")
+    ax[2].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "nonlinear_spacer.png", dpi=120)
+    print(f"wrote {out}/unseamed.nc, seam.nc, layer_rigidity.nc, nonlinear_spacer.png in {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
