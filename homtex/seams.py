@@ -13,7 +13,8 @@ Two models:
     every eps0, so the paper's 14.33 mm at d = 24 mm cannot be reached by eps0 alone: the cell
     file's ``prestrain`` is a nominal, UNCALIBRATED value. The contact active set (pdas) can cycle
     at some load steps; failed steps are halved, and the result depends slightly on the step path
-    (contact geometry re-linearised per step).
+    (contact geometry re-linearised per step). ``geometry="nonlinear"`` (co-rotational beams)
+    leaves the dip as it is where its ramp gets (studies/nonlinear_spacer.py).
 ``method="foundation"`` (:func:`foundation_profile`): the analytical model below. Its layer
     rigidity was chosen AFTER looking at the 18 / 43 mm results, so its numbers for those seam
     distances are a fit, not a prediction; it is kept as a cheap trend model.

@@ -27,8 +27,8 @@ the thickness, fabric between z = 0 and z = T):
   compressed at the seam line until its resistance balances the stitch tension.
 
 Limitations: the thread does not slide through the needle hole (the tension is not equalised
-between the surface chains and the legs), the beams are geometrically linear (contact geometry is
-re-linearised per load step), frictionless contact.
+between the surface chains and the legs), frictionless contact. The solvers (homtex.seams) use
+geometrically linear beams by default and co-rotational ones on request.
 """
 
 from __future__ import annotations
