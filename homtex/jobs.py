@@ -327,8 +327,8 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
     s_mi = np.interp(w_y, w_m, s_m)
     sel = w_y <= strain * H0 + 1e-9
     err = float(np.abs(s_mi[sel] - s_y[sel]).max() / max(np.abs(s_y[sel]).max(), 1e-300))
-    # the punch meeting the stitch thread on the seam line: the stitch legs then act as struts
-    # (a beam model of a thread carries compression), which the macro layer does not represent
+    # the punch meeting the stitch thread on the seam line: from then on the thread (tension-only,
+    # its legs go slack) and the seam line take load, which the macro layer does not represent
     hit = yarn["stitch_plate_contacts"].values[keep] > 0
     w_hit = float(w_y[hit][0]) if hit.any() else float("inf")
     pre = sel & (w_y < w_hit)
