@@ -31,6 +31,8 @@ _LAZY = {
     "macro_curve": ".macro",
     "run_study": ".study",
     "Lookup": ".rom",
+    "solve_nonlinear": ".nonlinear",
+    "Corotational": ".nonlinear",
 }
 
 __all__ = ["Frame", "InputError", "LinearSolver", "SolveReport", "SolverError", "StaticResult",

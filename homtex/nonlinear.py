@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import InputError, SolverError
 from .fem.assembly import Assembler
-from .fem.corotational import add_geometric, corotational_response, gather_ends, logmap, rotate_nodes
+from .fem.corotational import add_geometric, corotational_response, gather_ends, log_nodes, rotate_nodes
 from .frame import Frame
 from .solvers import LinearSolver, constrain
 from .supports import check_held, parse_fixed, parse_loads
@@ -86,7 +86,8 @@ class Corotational:
 
     def u(self) -> np.ndarray:
         """(n, 6) translations (mm) and rotation vectors log(Q) (rad)."""
-        rot = np.array([logmap(q) for q in self.Q]) if len(self.Q) else np.zeros((0, 3))
+        rot = np.empty((len(self.Q), 3))
+        log_nodes(self.Q, rot)
         return np.hstack([self.ut, rot])
 
     # -- forces and tangent

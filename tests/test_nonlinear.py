@@ -8,7 +8,8 @@ from scipy.special import ellipe, ellipk
 import homtex
 from homtex.errors import InputError, SolverError
 from homtex.fem.corotational import expmap, logmap
-from homtex.nonlinear import Corotational, solve_nonlinear
+from homtex.nonlinear import Corotational
+from homtex import solve_nonlinear
 
 from conftest import line_frame
 

@@ -202,3 +202,10 @@ def rotate_nodes(Q, dtheta):
     """Q[i] <- exp(dtheta[i]) Q[i] in place (spatial spin update), (n, 3, 3) and (n, 3)."""
     for i in prange(Q.shape[0]):
         Q[i] = expmap(dtheta[i]) @ Q[i]
+
+
+@njit(cache=True, parallel=True)
+def log_nodes(Q, out):
+    """out (n, 3) = rotation vectors log(Q[i]) of (n, 3, 3) rotation matrices."""
+    for i in prange(Q.shape[0]):
+        out[i] = logmap(Q[i])
