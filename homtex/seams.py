@@ -359,15 +359,21 @@ class SeamSolver:
         self.warm = res.extra["active_keys"]
         self.result = res
 
-    def ramp(self, steps: int = 4, max_cuts: int = 4):
+    def ramp(self, steps: int = 4, max_cuts: int = 4, time_limit: float | None = None):
         """Raise the pre-strain factor from the current value to 1 in ``steps`` equal steps; a step
-        whose contact solve fails is halved (at most ``max_cuts`` times in a row).
+        whose contact solve fails is halved (at most ``max_cuts`` times in a row). ``time_limit``
+        (s): stop with a SolverError once it is exceeded (the accepted steps are kept).
         Returns the list of (alpha, contact iterations, active contacts) of the accepted steps."""
+        import time
+
         from .errors import SolverError
 
         da = da0 = (1.0 - self.alpha) / int(steps)
         cuts = 0
+        t0 = time.perf_counter()
         while self.alpha < 1.0 - 1e-12:
+            if time_limit is not None and time.perf_counter() - t0 > time_limit:
+                raise SolverError(f"seam pre-strain ramp: time limit {time_limit:g} s reached at {self.alpha:.4g} x eps0")
             a = min(1.0, self.alpha + da)
             try:
                 res = self._solve(a)

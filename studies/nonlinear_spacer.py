@@ -55,13 +55,13 @@ def unseamed(cell, strain, steps, factors):
     return out
 
 
-def seam(cell, d, eps0, ramp_steps, stabilize):
+def seam(cell, d, eps0, ramp_steps, stabilize, seconds):
     fr, info = seam_cell(cell, seam_distance=d, prestrain=eps0)
     ss = SeamSolver(fr, info, geometry="nonlinear", stabilize=stabilize)
     t = time.perf_counter()
     status = "ok"
     try:
-        ss.ramp(ramp_steps, max_cuts=2)
+        ss.ramp(ramp_steps, max_cuts=2, time_limit=seconds)
     except SolverError as err:
         status = f"stopped: {err}"
     sec = time.perf_counter() - t
@@ -120,6 +120,7 @@ def main(argv=None):
     p.add_argument("--distance", type=float, default=24.0)
     p.add_argument("--prestrain", type=float, default=0.3)
     p.add_argument("--quick", action="store_true", help="short unseamed runs (strain 0.05, 10 steps)")
+    p.add_argument("--seam-seconds", type=float, default=240.0, help="time budget of the co-rotational seam ramp")
     p.add_argument("--plot-only", action="store_true", help="redraw the chart from OUTDIR's netCDF files")
     a = p.parse_args(argv)
     if a.quick:
@@ -135,7 +136,7 @@ def main(argv=None):
         un = unseamed(cell, a.strain, a.steps, (1e-6, 1e-7))
         write_netcdf(un, out / "unseamed.nc")
         print("2. seam cell with co-rotational beams", flush=True)
-        se = seam(cell, a.distance, a.prestrain, 40, 1e-7)
+        se = seam(cell, a.distance, a.prestrain, 40, 1e-7, a.seam_seconds)
         write_netcdf(se, out / "seam.nc")
         print("3. layer rigidity", flush=True)
         lr = layer_rigidity(a.distance, a.prestrain, (1.0, 5.0, 15.0, 50.0))
