@@ -682,7 +682,7 @@ class _SlackThreads:
         R, L, EA, GJ, EIy, EIz, kGA = self.full
         K = self.cs.assembler.stiffness((R, L, EA * scale, GJ, EIy, EIz, kGA))
         self.cs.set_stiffness(K)
-        ss.f_pre = prestrain_load(self.frame.with_(prestrain=scale * self.frame.prestrain))
+        ss.f_pre = prestrain_load(self.frame, EA * scale)
 
     def solve(self, ss, max_rounds: int = 12):
         from .errors import SolverError

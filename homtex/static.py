@@ -29,13 +29,15 @@ def element_state(frame: Frame, u: np.ndarray, jump=None):
     return forces, energy
 
 
-def prestrain_load(frame: Frame) -> np.ndarray:
-    """(6n,) equivalent nodal loads of the frame's initial strains."""
+def prestrain_load(frame: Frame, EA=None) -> np.ndarray:
+    """(6n,) equivalent nodal loads of the frame's initial strains (``EA`` (m,): axial
+    stiffnesses to use instead of the frame's, e.g. with slack elements)."""
     f = np.zeros((frame.n_nodes, 6))
     if not np.any(frame.prestrain):
         return f.ravel()
+    EA = frame.E * frame.A if EA is None else np.ascontiguousarray(EA, dtype=float)
     pe = np.empty((frame.n_elements, 2, 3))
-    prestrain_forces(frame.elements, frame.R, frame.E * frame.A, frame.prestrain, pe)
+    prestrain_forces(frame.elements, frame.R, EA, frame.prestrain, pe)
     np.add.at(f[:, :3], frame.elements[:, 0], pe[:, 0])
     np.add.at(f[:, :3], frame.elements[:, 1], pe[:, 1])
     return f.ravel()

@@ -171,9 +171,8 @@ class ContactSolver:
         self.f = np.concatenate([self.f_loads + _prestrain_load(frame), np.zeros(6 * P)])
         asm = assembler or Assembler(frame)
         self.assembler = asm
-        K = asm.stiffness().tocsr()
-        self.K = K
-        self.K_ext = sp.block_diag([K, sp.csr_matrix((6 * P, 6 * P))], format="csr") if P else K.copy()
+        self.set_stiffness(asm.stiffness())
+        K = self.K
         d = K.diagonal().reshape(n, 6)[:, :3]
         self.k_scale = float(d.mean())
         self.k = float(contact.penalty) if contact.penalty is not None else self.k_scale
@@ -227,12 +226,7 @@ class ContactSolver:
 
     def _offset(self, keys):
         """(len(keys),) gap offset of each candidate (initial overlap treated as touching), mm."""
-        out = np.zeros(len(keys))
-        if len(self.offset_keys) and len(keys):
-            pos = np.minimum(np.searchsorted(self.offset_keys, keys), len(self.offset_keys) - 1)
-            hit = self.offset_keys[pos] == keys
-            out[hit] = self.offset_vals[pos[hit]]
-        return out
+        return _by_key(self.offset_keys, self.offset_vals, keys)
 
     # ------------------------------------------------------------------
     def set_plate(self, p: int, *, displacement=None, force=None):
@@ -487,20 +481,13 @@ class ContactSolver:
                     except SolverError:
                         active = np.ones(rows.M, dtype=bool)
                 lam = np.zeros(rows.M)
-                if warm_keys is not None and warm_forces is not None and len(warm_keys):
+                if warm_keys is not None and warm_forces is not None:
                     wk = np.asarray(warm_keys)
                     order = np.argsort(wk)
-                    pos = np.minimum(np.searchsorted(wk[order], rows.keys), len(wk) - 1)
-                    hit = wk[order][pos] == rows.keys
-                    lam[hit] = np.asarray(warm_forces, dtype=float)[order][pos[hit]]
+                    lam = _by_key(wk[order], np.asarray(warm_forces, dtype=float)[order], rows.keys)
             else:
                 old = np.isin(rows.keys, prev_keys[prev_active])
-                lam_new = np.zeros(rows.M)
-                pos = np.searchsorted(prev_keys_sorted, rows.keys)
-                pos = np.minimum(pos, len(prev_keys_sorted) - 1)
-                hit = prev_keys_sorted[pos] == rows.keys
-                lam_new[hit] = prev_lam_sorted[pos[hit]]
-                lam = lam_new
+                lam = _by_key(prev_keys_sorted, prev_lam_sorted, rows.keys)
                 active = old | ~np.isin(rows.keys, prev_keys)
             active &= ~rigid
             if cont.strategy == "pdas":
@@ -740,6 +727,16 @@ class ContactSolver:
         if cont.enforcement == "penalty":
             self._check_penetration(rows, h, active)
         return x, lam, h, active, it, updates
+
+
+def _by_key(sorted_keys, values, keys):
+    """(len(keys),) values[i] where sorted_keys[i] == key, 0 where the key is absent."""
+    out = np.zeros(len(keys))
+    if len(sorted_keys) and len(keys):
+        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
+        hit = sorted_keys[pos] == keys
+        out[hit] = values[pos[hit]]
+    return out
 
 
 def _new_stats():
