@@ -81,8 +81,7 @@ def seam(cell, d, eps0, ramp_steps, stabilize, seconds):
         coords={"model": ["co-rotational", "linear"], "x": ("x", x, {"units": "mm", "long_name": "position across the seam"})})
     ds.attrs.update(experiment="seam cell, stitch pre-strain ramp", seam_distance_mm=float(info["seam_distance"]),
                     target_prestrain=eps0, reached_prestrain=reached, status=status, seconds=sec,
-                    stabilize=stabilize, ramp_steps=int(ramp_steps), newton_iterations=int(sum(
-                        1 for _ in ss.history)))
+                    stabilize=stabilize, ramp_steps=int(ramp_steps), accepted_steps=len(ss.history))
     return ds
 
 
