@@ -15,21 +15,30 @@ along x). Strip i at x_i is a cushion column of height h_i:
 Every column follows the unseamed cell's compression law sigma_u(eps) (kPa over strain
 measured from H0, from ``homtex.compress`` through a :class:`homtex.Lookup`). A column of
 height h < H0 is the unseamed fabric already compressed to h, so it starts at strain
-eps0 = 1 - h/H0 of that law. The punch starts at H0 (plate displacement w = 0) and meets
-column i when H0 - w < h_i, i.e. w > H0 - h_i; from then on the column is at strain
-eps = w/H0 and carries
+eps0 = 1 - h/H0 of that law; its pre-load sigma_u(eps0) is held by the stitch thread (through
+the seam line and the bent layers: over a seam cell the pile's pre-load adds up to the thread's
+pull). The punch starts at H0 (plate displacement w = 0) and meets column i when
+H0 - w < h_i, i.e. w > w_i = H0 - h_i; from then on the column is at strain eps = w/H0 and
+carries
 
-    pre_stress="held" (default):  sigma_i = sigma_u(eps) - sigma_u(eps0)
-    pre_stress="released":        sigma_i = sigma_u(eps)
+    pre_stress="thread" (default): sigma_i = sigma_u(eps) - sigma_u(eps0) max(0, 1 - (w - w_i) / delta_s)
+    pre_stress="held":             sigma_i = sigma_u(eps) - sigma_u(eps0)
+    pre_stress="released":         sigma_i = sigma_u(eps)
 
-"held" is the choice made here and why: the seam thread and the bent surface layers that
-hold the cushion at h keep carrying the pre-load sigma_u(eps0) internally (the state of
-the column is that of the unseamed fabric at eps0, so its *tangent* law is the unseamed
-law from eps0 on), and the punch force rises continuously from zero at first contact, as
-the measured curves do. "released" (an inextensible thread that goes slack at once, the
-punch taking over the whole pre-load) gives a jump at each contact and is kept as the bound
-on the other side. Rescaling the law to the local height (sigma_u(1 - z/h)) was rejected:
-it treats a pre-compressed column as fresh fabric, with straight pile yarns it no longer has.
+"thread": the stitch thread is tension-only and elastic. Pushing the fabric down by delta
+shortens the thread's path and lowers its tension by (EA / L) delta; it is slack after the
+slack travel delta_s = N L / EA (N its tension, L the loaded thread length, EA its axial
+stiffness), and from then on the punch carries the column's whole pre-load. Column and thread
+are two springs in parallel: for a linear law this is exact (tests/test_macro.py). delta_s
+comes with the seam profile (``slack_travel``, from the seam model's own thread tension) or is
+given. The two other laws are its limits: "held" (delta_s -> infinity: a compliant, long
+thread keeps its pull; the punch force rises continuously from zero, as the measured curves
+do) and "released" (delta_s -> 0: a stiff thread with a small tension goes slack at once).
+The yarn-level seam cell of cells/spacer_20mm.toml is of the second kind (d = 24 mm: legs of
+1.8 N, delta_s = 0.09 mm; against it "thread" is 8 % off to 30 % compression, "held" 16 %,
+README), the fitted foundation seams slacken after 0.25-0.29 mm.
+Rescaling the law to the local height (sigma_u(1 - z/h)) was rejected: it treats a
+pre-compressed column as fresh fabric, with straight pile yarns it no longer has.
 
 Total force F(w) = sum_i a_i sigma_i(w) (a_i = plate_area / n_columns), stress = F / plate_area.
 Strain in the output is w / H0 (the paper's curves start from a 20 mm plate distance).
@@ -45,6 +54,8 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["macro_curve", "column_heights", "unseamed_law"]
+
+PRE_STRESS = ("thread", "held", "released")
 
 
 def _thickness(cell, curve, thickness):
@@ -93,10 +104,11 @@ def unseamed_law(curve):
 
 
 def _profile_fn(profile, d):
-    """(h(x_local) for x_local in [0, d), cushion height) from a Dataset or callable."""
+    """(h(x_local) for x_local in [0, d), cushion height, slack travel mm or None) from a
+    Dataset or callable."""
     if callable(profile) and not hasattr(profile, "data_vars"):
         xs = np.linspace(0.0, d, 401)[:-1]
-        return (lambda x: np.asarray(profile(x, d), dtype=float)), float(np.max(profile(xs, d)))
+        return (lambda x: np.asarray(profile(x, d), dtype=float)), float(np.max(profile(xs, d))), None
     if not hasattr(profile, "data_vars") or "height" not in profile or "x" not in profile.coords:
         raise InputError("macro_curve: profile must be a Dataset with 'height' (mm) over 'x' (mm) "
                          "or a callable h(x, seam_distance)")
@@ -107,7 +119,8 @@ def _profile_fn(profile, d):
     order = np.argsort(x)
     x, h = x[order], h[order]  # x = 0 is the seam line; the profile repeats every d
     hc = float(profile["cushion_height"]) if "cushion_height" in profile else float(h.max())
-    return (lambda q: np.interp(q, x, h, period=d)), hc
+    slack = float(profile["slack_travel"]) if "slack_travel" in profile else None
+    return (lambda q: np.interp(q, x, h, period=d)), hc, slack
 
 
 def column_heights(H0: float, *, seam_distance=None, profile=None, height_scatter: float = 0.0,
@@ -118,7 +131,7 @@ def column_heights(H0: float, *, seam_distance=None, profile=None, height_scatte
     if seam_distance is None:
         return x, np.full(n_columns, float(H0)), np.zeros(n_columns, dtype=np.int64)
     d = float(seam_distance)
-    h_of, hc = _profile_fn(profile, d)
+    h_of, hc, _ = _profile_fn(profile, d)
     xs = x - seam_offset
     cushion = np.floor(xs / d).astype(np.int64)
     h = h_of(np.mod(xs, d))
@@ -132,8 +145,8 @@ def column_heights(H0: float, *, seam_distance=None, profile=None, height_scatte
 
 def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, plate_area: float = 12100.0,
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
-                steps: int = 201, thickness: float | None = None, pre_stress: str = "held",
-                seam_offset: float = 0.0, compress_options: dict | None = None,
+                steps: int = 201, thickness: float | None = None, pre_stress: str = "thread",
+                slack_travel: float | None = None, seam_offset: float = 0.0, compress_options: dict | None = None,
                 profile_options: dict | None = None):
     """Force-compression curve of a (seamed) specimen under a flat punch: the cushion layer.
 
@@ -152,7 +165,10 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         or a callable h(x_local (n,), seam_distance) -> (n,) mm.
     n_columns : strips across the plate; steps : plate positions (0 .. strain H0).
     thickness : H0, mm (default from the curve's ``thickness_mm`` attribute or the cell).
-    pre_stress : "held" (default) or "released" (see the module docstring).
+    pre_stress : "thread" (default), "held" or "released": who carries a pre-compressed column's
+        pre-load once the punch is on it (see the module docstring).
+    slack_travel : delta_s, mm: punch travel past a column's first contact after which the
+        stitch thread is slack ("thread" only). None: the profile's ``slack_travel``.
     seam_offset : position of a seam line from the plate edge, mm (profile x = 0 is a seam line).
     compress_options, profile_options : keyword arguments for ``homtex.compress`` and
         ``homtex.seam_profile`` (e.g. ``{"method": "foundation"}``) where they are called.
@@ -166,8 +182,10 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     import xarray as xr
 
     t0 = time.perf_counter()
-    if pre_stress not in ("held", "released"):
-        raise InputError(f"macro_curve: pre_stress must be 'held' or 'released', got {pre_stress!r}")
+    if pre_stress not in PRE_STRESS:
+        raise InputError(f"macro_curve: pre_stress must be one of {PRE_STRESS}, got {pre_stress!r}")
+    if slack_travel is not None and not float(slack_travel) >= 0:  # inf allowed: "held"
+        raise InputError(f"macro_curve: slack_travel must be a length >= 0 (mm), got {slack_travel!r}")
     if not (0 < strain < 1):
         raise InputError(f"macro_curve: strain must be in (0, 1), got {strain!r}")
     if not plate_area > 0:
@@ -216,11 +234,32 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     # O((n_columns + steps) log n_columns), no (steps, n_columns) array.
     e0 = np.sort(eps0)
     k = np.searchsorted(e0, eps, side="left")  # number of columns with eps0 < eps
-    s_now = law(eps)
-    total = k * s_now
-    if pre_stress == "held":
-        cum = np.r_[0.0, np.cumsum(law(np.minimum(e0, eps_end)))]
-        total = total - cum[k]
+    total = k * law(eps)
+    delta = None
+    if pre_stress == "thread" and seam_distance is not None:
+        delta = slack_travel if slack_travel is not None else _profile_fn(profile, float(seam_distance))[2]
+        if delta is None:
+            raise InputError("macro_curve: pre_stress='thread' needs the stitch thread's slack travel: give "
+                             "slack_travel= (mm) or a seam profile with a 'slack_travel' variable "
+                             "(homtex.seam_profile writes one)")
+        delta = float(delta)
+    if pre_stress == "held" or (pre_stress == "thread" and delta is not None):
+        # pre-load c_i = sigma_u(eps0_i) of the engaged columns (sorted, so a prefix), minus what the
+        # thread has handed to the punch. With w_i = eps0_i H0, the thread still holds
+        #   c_i (1 - (w - w_i) / delta)  for  w - delta < w_i < w:
+        # two prefix sums (of c_i and c_i w_i), O((n_columns + steps) log n_columns), no (steps, n) array.
+        c = law(np.minimum(e0, eps_end))
+        cum = np.r_[0.0, np.cumsum(c)]
+        if pre_stress == "held" or math.isinf(delta):
+            held = cum[k]
+        elif delta == 0.0:
+            held = np.zeros_like(eps)
+        else:
+            wi = e0 * H0
+            cw = np.r_[0.0, np.cumsum(c * wi)]
+            j = np.searchsorted(wi, w - delta, side="right")  # columns with w_i <= w - delta are released
+            held = (1.0 - w / delta) * (cum[k] - cum[j]) + (cw[k] - cw[j]) / delta
+        total = total - held
     force = total * a * 1e-3  # kPa mm^2 -> N
     frac = k / n_columns
     seconds = time.perf_counter() - t0 - t_sub
@@ -241,7 +280,8 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         attrs={"model": "macro cushion layer (columns engaged one after another)", "thickness_mm": H0,
                "plate_area_mm2": float(plate_area), "seam_distance_mm": "none" if seam_distance is None else float(seam_distance),
                "height_scatter_mm": float(height_scatter), "seed": "none" if seed is None else int(seed),
-               "n_columns": int(n_columns), "pre_stress": pre_stress, "seam_offset_mm": float(seam_offset),
+               "n_columns": int(n_columns), "pre_stress": pre_stress,
+               "slack_travel_mm": "none" if delta is None else float(delta), "seam_offset_mm": float(seam_offset),
                "cushion_height_mean_mm": float(np.mean(list(per.values()))),
                "cushion_height_min_mm": float(min(per.values())), "cushion_height_max_mm": float(max(per.values())),
                "first_contact_mm": float(H0 - h.max()), "full_contact_mm": float(H0 - h.min()),

@@ -57,6 +57,8 @@ from .errors import InputError
 
 GEOMETRIES = ("linear", "nonlinear")
 
+SLACK_LONG_NAME = "punch travel at the seam line until the stitch thread is slack (tension / stiffness)"
+
 #: default contact options used to measure the fabric modulus for the foundation
 _N_IMAGES = 30
 
@@ -186,6 +188,9 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
     else:
         hs = brentq(resid, 0.0, H, xtol=1e-12)
     P = force(hs)
+    # the punch pushing the top layer down by delta at the seam line shortens the thread path by
+    # 2 delta (two vertical passes) and lowers its tension N = P / 2 by EA 2 delta / L_rest
+    slack = 0.5 * P * L_rest / (2.0 * EA)
     x = np.linspace(-0.5 * d, 0.5 * d, int(points))
     h = H - 2.0 * P * _green(x, d, beta, k)
     ds = xr.Dataset(
@@ -193,6 +198,7 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
          "cushion_height": ((), float(h.max()), {"units": "mm", "long_name": "cushion height (max height between seams)"}),
          "seam_height": ((), float(hs), {"units": "mm", "long_name": "height at the seam line"}),
          "stitch_force": ((), float(P), {"units": "N", "long_name": "stitch pull per stitch and layer"}),
+         "slack_travel": ((), float(slack), {"units": "mm", "long_name": SLACK_LONG_NAME}),
          "prestrain": ((), eps0, {"units": "1", "long_name": "stitch-yarn pre-strain eps0"})},
         coords={"x": ("x", x, {"units": "mm", "long_name": "position across the seam (0 = seam line)"})})
     ds.attrs.update(model="foundation", method="foundation",
@@ -438,6 +444,7 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
     status = "ok"
     u = None
     N_leg = 0.0
+    slack = 0.0
     hist = []
     iters = 0
     if eps0 > 0.0:
@@ -449,6 +456,12 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
             res = ss.result
             u = res.u
             N_leg = float(np.mean(res.forces[info["legs"], 6]))
+            # the top and bottom legs of a stitch are in series between the needle and bobbin threads:
+            # pushing the seam line down by delta shortens them by delta; slack after N L / EA_leg
+            xyz = frame.nodes + np.asarray(u)[:frame.n_nodes, :3]
+            el = frame.elements[info["legs"]]
+            L_legs = float(np.linalg.norm(xyz[el[:, 1]] - xyz[el[:, 0]], axis=1).sum()) / max(int(stitches), 1)
+            slack = max(N_leg, 0.0) * L_legs / (2.0 * float(info["stitch_EA"]))
             iters = sum(h[1] for h in hist)
         except SolverError as err:
             status = f"failed: {err}"
@@ -463,6 +476,7 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
          "cushion_height": ((), float(np.max(h)), {"units": "mm", "long_name": "cushion height (max height between seams)"}),
          "seam_height": ((), float(h[i0]), {"units": "mm", "long_name": "height at the seam line"}),
          "stitch_force": ((), N_leg, {"units": "N", "long_name": "axial force of a stitch leg (two thread strands)"}),
+         "slack_travel": ((), slack, {"units": "mm", "long_name": SLACK_LONG_NAME}),
          "prestrain": ((), eps0, {"units": "1", "long_name": "stitch-yarn pre-strain eps0"}),
          "seam_distance": ((), d_eff, {"units": "mm", "long_name": "effective seam distance (whole fabric repeats)"})},
         coords={"x": ("x", x, {"units": "mm", "long_name": "position across the seam (0 = seam line)"})})

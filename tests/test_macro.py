@@ -46,7 +46,7 @@ def test_no_seams_from_dataset_curve():
 
 def test_engagement_order_force_zero_until_tallest_cushion():
     ds = macro_curve(curve=linear, thickness=H0, seam_distance=24.0, profile=bump(6.0, 16.0), steps=401,
-                     strain=0.6, n_columns=880)
+                     strain=0.6, n_columns=880, pre_stress="held")
     h = ds.column_height.values
     w = ds.plate_displacement.values
     first = H0 - h.max()
@@ -71,6 +71,54 @@ def test_released_prestress_bounds_held():
     assert np.all(rel >= held - 1e-12) and rel[-1] > held[-1]
 
 
+def test_thread_law_is_a_thread_and_a_column_in_parallel():
+    """pre_stress="thread" against an explicit two-spring model, column by column: the pile column
+    (law sigma_u) pre-compressed to its height by a tension-only elastic thread whose pull drops by
+    k_t per mm of punch travel; k_t is such that the thread is slack after delta."""
+    hs = np.array([19.0, 17.5, 16.0, 14.0, 11.0])  # a stepped cushion: five heights, equal widths
+    d, delta, n = 25.0, 0.7, 500
+
+    def profile(x, dd):
+        return hs[np.minimum((np.asarray(x) / dd * hs.size).astype(int), hs.size - 1)]
+
+    for law in (linear, stiffening):
+        ds = macro_curve(curve=law, thickness=H0, seam_distance=d, profile=profile, strain=0.5, steps=301,
+                         n_columns=n, pre_stress="thread", slack_travel=delta)
+        h = ds.column_height.values
+        w = ds.plate_displacement.values
+        F = np.zeros_like(w)
+        for hi in h:
+            e0 = 1.0 - hi / H0
+            T0 = law(e0)                    # thread pull (kPa over the column) balances the pre-load
+            k_t = T0 / delta                # thread stiffness: slack after delta
+            for j, wj in enumerate(w):
+                dw = wj - (H0 - hi)         # punch travel past the column's top
+                if dw > 0:
+                    T = max(0.0, T0 - k_t * dw)
+                    F[j] += (law(wj / H0) - T) * (A / n) * 1e-3
+        np.testing.assert_allclose(ds.force.values, F, rtol=1e-10, atol=1e-9)
+
+
+def test_thread_law_between_its_limits():
+    kw = dict(curve=stiffening, thickness=H0, seam_distance=18.0, profile=bump(6.0, 12.0), strain=0.5)
+    held = macro_curve(pre_stress="held", **kw).force.values
+    rel = macro_curve(pre_stress="released", **kw).force.values
+    np.testing.assert_allclose(macro_curve(pre_stress="thread", slack_travel=0.0, **kw).force.values, rel,
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(macro_curve(pre_stress="thread", slack_travel=np.inf, **kw).force.values, held,
+                               rtol=1e-12, atol=1e-12)
+    prev = rel
+    for delta in (0.1, 0.5, 2.0, 8.0):  # a softer / longer thread holds more of the pre-load
+        f = macro_curve(pre_stress="thread", slack_travel=delta, **kw).force.values
+        assert np.all(f <= prev + 1e-9) and np.all(f >= held - 1e-9) and (f < rel - 1e-6).any()
+        prev = f
+    # a callable profile carries no thread: the slack travel must be given
+    with pytest.raises(InputError, match="slack_travel"):
+        macro_curve(**kw)
+    with pytest.raises(InputError, match="slack_travel"):
+        macro_curve(slack_travel=-1.0, **kw)
+
+
 def transition(ds):
     f = ds.engaged_fraction.values
     w = ds.plate_displacement.values
@@ -78,7 +126,8 @@ def transition(ds):
 
 
 def test_scatter_widens_transition_and_is_seeded():
-    kw = dict(curve=linear, thickness=H0, seam_distance=24.0, profile=bump(12.0, 16.0), strain=0.6, steps=601)
+    kw = dict(curve=linear, thickness=H0, seam_distance=24.0, profile=bump(12.0, 16.0), strain=0.6, steps=601,
+              slack_travel=0.2)
     base = macro_curve(height_scatter=0.0, **kw)
     sc = macro_curve(height_scatter=1.5, seed=3, **kw)
     assert transition(sc) > transition(base) + 0.5
@@ -101,7 +150,8 @@ def test_more_seams_longer_first_region():
 
     first = []
     for d in (43.0, 24.0, 18.0):
-        ds = macro_curve(curve=stiffening, thickness=H0, seam_distance=d, profile=profile, strain=0.6, steps=601)
+        ds = macro_curve(curve=stiffening, thickness=H0, seam_distance=d, profile=profile, strain=0.6, steps=601,
+                         slack_travel=0.3)
         f = ds.force.values
         w = ds.plate_displacement.values
         first.append(w[np.argmax(f > 0.05 * f[-1])])
