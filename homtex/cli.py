@@ -5,7 +5,7 @@
     homtex homogenize CELL [--out DIR]          effective stiffness of a periodic cell
     homtex compress CELL [--strain 0.3] [--steps 20] [--out DIR]
     homtex seam     CELL --distance D [--prestrain EPS] [--out DIR]
-    homtex macro    CELL [--distance D] [--scatter S] [--out DIR]
+    homtex macro    CELL [--distance D] [--scatter S] [--pre-stress LAW] [--slack-travel MM] [--out DIR]
     homtex study    STUDY.toml --out DIR [--scheduler ADDRESS]
     homtex plot     FILE.nc [--out PNG]
 
@@ -83,7 +83,8 @@ def cmd_macro(args) -> None:
     from .jobs import macro_cell
 
     ds, paths = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
-                           height_scatter=args.scatter, seed=args.seed)
+                           height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
+                           slack_travel=args.slack_travel)
     _say(str(ds))
     for p in paths:
         _say(f"  wrote {p}")
@@ -145,6 +146,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--distance", type=float, default=None, help="seam distance, mm (default: no seams)")
     s.add_argument("--scatter", type=float, default=0.0, help="height scatter between cushions")
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--pre-stress", choices=("thread", "held", "released"), default="thread",
+                   help="who carries a pre-compressed cushion's pre-load under the punch (default: the thread "
+                   "hands it over within its slack travel)")
+    s.add_argument("--slack-travel", type=float, default=None,
+                   help="thread slack travel, mm (default: from the seam profile)")
     s.add_argument("--out")
     s.set_defaults(func=cmd_macro)
 

@@ -656,11 +656,13 @@ def seam_cell(path, out: Path, *, seam_distance, prestrain=None):
     return prof, [nc, png]
 
 
-def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0):
+def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0, pre_stress="thread",
+               slack_travel=None):
     from .macro import macro_curve
 
     cell = _load(path)
-    ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed)
+    ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,
+                     pre_stress=pre_stress, slack_travel=slack_travel)
     out = Path(out)
     stem = f"{cell.name}_macro_" + ("noseam" if seam_distance is None else f"{float(seam_distance):g}mm")
     nc = _save(_attrs(ds, title="macro cushion layer"), out / f"{stem}.nc")
