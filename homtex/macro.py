@@ -29,7 +29,7 @@ carries
 shortens the thread's path and lowers its tension by (EA / L) delta; it is slack after the
 slack travel delta_s = N L / EA (N its tension, L the loaded thread length, EA its axial
 stiffness), and from then on the punch carries the column's whole pre-load. Column and thread
-are two springs in parallel: for a linear law this is exact (tests/test_macro.py). delta_s
+are two springs in parallel, checked column by column against that model (tests/test_macro.py). delta_s
 comes with the seam profile (``slack_travel``, from the seam model's own thread tension) or is
 given. The two other laws are its limits: "held" (delta_s -> infinity: a compliant, long
 thread keeps its pull; the punch force rises continuously from zero, as the measured curves
