@@ -521,7 +521,7 @@ def seam_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
     raise InputError(f"seam_profile: method must be 'yarn' or 'foundation', got {method!r}")
 
 
-def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, steps: int = 10,
+def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, steps: int = 30,
                      prestrain: float | None = None, contact=None, ramp_steps: int = 4, tension_only: bool = True):
     """Yarn-level compression of a seamed spacer fabric between two rigid plates (paper's Fig. 11).
 
@@ -537,7 +537,9 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
     seam_distance : d, mm (rounded to whole fabric repeats); None: the unseamed fabric
         (``homtex.compress`` on the fabric cell with the same contact options).
     strain : final compression (plate displacement / H0), 0 < strain < 1.
-    steps : plate steps.
+    steps : plate steps. The contact geometry is re-linearised per step, so the curve depends on
+        them: on the d = 24 mm cell to 30 % the default 30 steps are within 1 % of 60, 15 steps
+        5 %, 8-10 steps 12-37 % - and slower, because too-large steps fail and are halved.
     prestrain : eps0 (None: ``[parameters.seam] prestrain``).
     tension_only : the stitch thread cannot carry compression (default): elements that would be
         shortened below their rest length go slack during the compression (see ``_SlackThreads``).
