@@ -606,8 +606,19 @@ class ContactSolver:
         for outer in range(1, cont.max_updates + 1):
             seen = {active.tobytes()}
             single = set()          # sets visited after a cycle, changing one contact at a time
+            prev = None
             for inner in range(1, cont.max_iter + 1):
-                self._check_held(rows, active)
+                try:
+                    self._check_held(rows, active)
+                except SolverError:
+                    if prev is None:
+                        raise
+                    # the update opened every contact that held a part (e.g. the first small plate
+                    # step on a structure held only by contacts): keep the previous set's contacts
+                    active = active | prev
+                    self._check_held(rows, active)
+                    self.stats["held_unions"] += 1
+                prev = active
                 iters += 1
                 try:
                     x, h = self._penalised(rows, g, active, lam, x, k)
@@ -741,7 +752,8 @@ def _by_key(sorted_keys, values, keys):
 
 def _new_stats():
     return {"setups": 0, "reused_setups": 0, "setup_seconds": 0.0, "solve_seconds": 0.0, "penalty_increases": 0,
-            "linear_solves": 0, "cg_iterations": 0, "forward_error": 0.0, "single_flips": 0}
+            "linear_solves": 0, "cg_iterations": 0, "forward_error": 0.0, "single_flips": 0,
+            "held_unions": 0}
 
 
 def _prestrain_load(frame):
