@@ -86,7 +86,7 @@ res = xr.Dataset({
     "seam_height": ("seam_distance", [float(p.seam_height) for p in profiles], {"units": "mm", "long_name": "seam height, yarn model"}),
     "effective_seam_distance": ("seam_distance", [p.attrs["effective_seam_distance_mm"] for p in profiles], {"units": "mm", "long_name": "seam distance of the cell (whole fabric repeats)"}),
     "seconds": ("seam_distance", secs, {"units": "s", "long_name": "wall time of the seam solve"}),
-    "foundation_cushion_height": ("seam_distance", [float(p.cushion_height) for p in fnd], {"units": "mm", "long_name": "cushion height, foundation model (not blind)"}),
+    "foundation_cushion_height": ("seam_distance", [float(p.cushion_height) for p in fnd], {"units": "mm", "long_name": "cushion height, foundation model (layer rigidity calibrated on 24 mm)"}),
     "paper_simulation": ("seam_distance", [paper[d] for d in D], {"units": "mm", "long_name": "cushion height simulated in the paper"}),
     "measured": ("seam_distance", [measured[d] for d in D], {"units": "mm", "long_name": "cushion height measured (Table 1; 18 mm: 8, text 12)"}),
     "cushion_height_15pct_43": ((), float(p15.cushion_height), {"units": "mm", "long_name": "cushion height d=43 mm, eps0=0.15"}),
@@ -113,7 +113,7 @@ ax[1].axhline(TARGET, color="r", ls=":", label="target 14.33 mm (paper, 24 mm)")
 ax[1].set(xlabel="stitch pre-strain eps0", ylabel="mm", title="calibration scan, d = 24 mm")
 ax[1].legend(fontsize=7)
 ax[2].plot(D, rows, "o-", label=f"yarn model (eps0 = {eps_used:.2f}{'' if np.isfinite(calibrated) else ', uncalibrated'})")
-ax[2].plot(D, [float(p.cushion_height) for p in fnd], "d-.", label="foundation model (not blind)")
+ax[2].plot(D, [float(p.cushion_height) for p in fnd], "d-.", label="foundation model (D calibrated on 24 mm)")
 ax[2].plot(D, [paper[d] for d in D], "s--", label="paper simulation")
 ax[2].plot(D, [measured[d] for d in D], "^:", label="measured")
 ax[2].set(xlabel="seam distance (mm)", ylabel="cushion height (mm)")
