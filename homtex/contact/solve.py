@@ -611,11 +611,12 @@ class ContactSolver:
                 try:
                     self._check_held(rows, active)
                 except SolverError:
-                    if prev is None:
-                        raise
                     # the update opened every contact that held a part (e.g. the first small plate
-                    # step on a structure held only by contacts): keep the previous set's contacts
-                    active = active | prev
+                    # step on a structure held only by contacts): keep the previous set's contacts;
+                    # a start set that holds nothing (the contacts carried into a re-detection round
+                    # are those with force > 0, and a holding contact can end at zero force) starts
+                    # from all candidates instead, as the first round does
+                    active = active | (free if prev is None else prev)
                     self._check_held(rows, active)
                     self.stats["held_unions"] += 1
                 prev = active
