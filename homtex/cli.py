@@ -73,7 +73,7 @@ def cmd_seam(args) -> None:
     from .jobs import seam_cell
 
     ds, paths = seam_cell(args.cell, _out(args, "results/seam"), seam_distance=args.distance,
-                          prestrain=args.prestrain)
+                          prestrain=args.prestrain, method=args.method)
     _say(f"cushion height {float(ds['cushion_height']):.2f} mm")
     for p in paths:
         _say(f"  wrote {p}")
@@ -84,7 +84,7 @@ def cmd_macro(args) -> None:
 
     ds, paths = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
                            height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
-                           slack_travel=args.slack_travel)
+                           slack_travel=args.slack_travel, seam_method=args.seam_method)
     _say(str(ds))
     for p in paths:
         _say(f"  wrote {p}")
@@ -137,7 +137,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("seam", help="cushion profile of a seam cell")
     s.add_argument("cell")
     s.add_argument("--distance", type=float, required=True, help="seam distance, mm")
-    s.add_argument("--prestrain", type=float, default=None, help="stitch-yarn pre-strain (default calibrated)")
+    s.add_argument("--prestrain", type=float, default=None,
+                   help="stitch-yarn pre-strain (default: the cell file's value for the method)")
+    s.add_argument("--method", choices=("yarn", "foundation"), default="yarn",
+                   help="yarn-level seam cell (default) or the analytical foundation model")
     s.add_argument("--out")
     s.set_defaults(func=cmd_seam)
 
@@ -151,6 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "hands it over within its slack travel)")
     s.add_argument("--slack-travel", type=float, default=None,
                    help="thread slack travel, mm (default: from the seam profile)")
+    s.add_argument("--seam-method", choices=("yarn", "foundation"), default="yarn",
+                   help="seam model that gives the cushion profile (default: the yarn-level seam cell)")
     s.add_argument("--out")
     s.set_defaults(func=cmd_macro)
 

@@ -646,26 +646,28 @@ def compress_cell(path, out: Path, *, strain=0.3, steps=20):
     return curve, list(paths.values())
 
 
-def seam_cell(path, out: Path, *, seam_distance, prestrain=None):
+def seam_cell(path, out: Path, *, seam_distance, prestrain=None, method="yarn"):
     from .plot import plot_profile
     from .seams import seam_profile
 
     cell = _load(path)
-    prof = seam_profile(cell, seam_distance=seam_distance, prestrain=prestrain)
+    prof = seam_profile(cell, seam_distance=seam_distance, prestrain=prestrain, method=method)
     out = Path(out)
-    stem = f"{cell.name}_seam_{float(seam_distance):g}mm"
+    stem = f"{cell.name}_seam_{float(seam_distance):g}mm_{method}"
     nc = _save(_attrs(prof, title=f"cushion profile, d = {seam_distance} mm"), out / f"{stem}.nc")
     png = plot_profile(prof, out / f"{stem}.png")
     return prof, [nc, png]
 
 
 def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0, pre_stress="thread",
-               slack_travel=None):
+               slack_travel=None, seam_method="yarn"):
     from .macro import macro_curve
 
     cell = _load(path)
     ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,
-                     pre_stress=pre_stress, slack_travel=slack_travel)
+                     pre_stress=pre_stress, slack_travel=slack_travel,
+                     profile_options={"method": seam_method})
+    ds.attrs["seam_method"] = seam_method
     out = Path(out)
     stem = f"{cell.name}_macro_" + ("noseam" if seam_distance is None else f"{float(seam_distance):g}mm")
     nc = _save(_attrs(ds, title="macro cushion layer"), out / f"{stem}.nc")

@@ -51,6 +51,7 @@ import math
 import os
 import sys
 import time
+from concurrent.futures import BrokenExecutor
 from functools import lru_cache
 from importlib import import_module
 from pathlib import Path
@@ -85,8 +86,10 @@ TASKS: dict[str, Callable] = {}
 def register_task(name: str):
     """Decorator: register ``fn(cell, **options) -> xr.Dataset`` under ``name``.
 
-    Worker processes started by *fork* inherit the registry; with spawn-started workers
-    (dask) register the task in an importable module or name it ``"module:function"``.
+    Worker processes (the local pool and dask) start as fresh interpreters and do not see
+    tasks registered in ``__main__``: register the task in an importable module or name it
+    ``"module:function"``; scripts that call :func:`run_study` need the usual
+    ``if __name__ == "__main__":`` guard.
     """
     def deco(fn):
         TASKS[name] = fn
@@ -463,10 +466,13 @@ class _Serial:
 
 class _Pool:
     def __init__(self, workers):
+        import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
         self.n_workers = workers
-        self.ex = ProcessPoolExecutor(max_workers=workers)
+        # fresh interpreters: a fork of a process whose numba / BLAS thread pools already ran
+        # (any homtex computation before run_study) kills its workers on their first kernel
+        self.ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
 
     def run(self, fn, jobs):
         from concurrent.futures import as_completed
@@ -663,6 +669,13 @@ def run_study(path, out_dir, *, scheduler=None, workers: int | None = None, prog
         try:
             for res in ex.run(_run_point, todo):
                 bar.step(res["status"] != STATUS_OK)
+        except BrokenExecutor as exc:
+            # a worker died without a Python error (killed for memory, a crash in native code):
+            # which point it ran is unknown, so nothing is recorded as failed; finished points stay
+            done = sum(_read_point(Path(j["file"]), j["key"]) is not None for j in jobs)
+            raise StudyError(f"a worker process died ({exc}); {done} of {study.n_points} points are "
+                             f"finished and kept in {out / 'points'}; run the study again to resume "
+                             "(fewer workers if memory ran out)", file=path) from exc
         finally:
             ex.close()
             bar.close()

@@ -79,3 +79,46 @@ def test_malformed_cell_file_names_key(tmp_path):
                        capture_output=True, text=True)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert "bad.toml" in p.stderr and "[parameters]" in p.stderr and "'a'" in p.stderr
+
+
+def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_path):
+    """cell, compress, seam, macro and study from the shell: each writes its files, and what is
+    in them is what the API gives (closed forms where there are any)."""
+    import homtex
+
+    spacer = "cells/spacer_20mm.toml"
+    assert main(["cell", spacer, "--out", str(tmp_path / "cell")]) == 0
+    assert (tmp_path / "cell" / "spacer_20mm.png").stat().st_size > 10_000
+    assert "thickness: 20.0" in (tmp_path / "cell" / "spacer_20mm.txt").read_text()
+    meshio = pytest.importorskip("meshio")
+    mesh = meshio.read(tmp_path / "cell" / "spacer_20mm.vtu")
+    assert sum(len(c.data) for c in mesh.cells) == homtex.load_cell(spacer).frame.n_elements
+
+    assert main(["compress", spacer, "--strain", "0.1", "--steps", "5", "--out", str(tmp_path / "c")]) == 0
+    with xr.open_dataset(tmp_path / "c" / "unseamed_compression.nc") as ds:
+        api = homtex.compress(homtex.load_cell(spacer), strain=0.1, steps=5)
+        np.testing.assert_allclose(ds.stress.values, api.stress.values, rtol=1e-8)
+    assert (tmp_path / "c" / "unseamed_compression.png").exists()
+
+    assert main(["seam", spacer, "--distance", "24", "--method", "foundation", "--out", str(tmp_path / "s")]) == 0
+    with xr.open_dataset(tmp_path / "s" / "spacer_20mm_seam_24mm_foundation.nc") as ds:
+        assert float(ds.cushion_height) == pytest.approx(14.33, abs=0.01)   # the calibration point
+    assert (tmp_path / "s" / "spacer_20mm_seam_24mm_foundation.png").exists()
+
+    assert main(["macro", spacer, "--distance", "24", "--seam-method", "foundation",
+                 "--out", str(tmp_path / "m")]) == 0
+    with xr.open_dataset(tmp_path / "m" / "spacer_20mm_macro_24mm.nc") as ds:
+        w, F = ds.plate_displacement.values, ds.force.values
+        first = 20.0 - float(ds.attrs["cushion_height_max_mm"])   # the punch meets the crests here
+        assert np.all(F[w < first - 1e-9] == 0.0) and np.all(F[w > first + 0.1] > 0.0)
+        assert np.all(np.diff(F) >= 0.0)
+    assert (tmp_path / "m" / "spacer_20mm_macro_24mm.png").exists()
+
+    assert main(["study", "studies/square_stiffness.toml", "--out", str(tmp_path / "st")]) == 0
+    with xr.open_dataset(tmp_path / "st" / "result.nc") as ds:
+        E = ds["yarns.strut.E"].values[:, None]
+        r = ds["yarns.strut.radius"].values[None, :]
+        a = 1.0                                                  # cells/square.toml pitch, mm
+        C11 = ds.C.sel(row="11", col="11").values
+        np.testing.assert_allclose(C11, E * np.pi * r**2 / a, rtol=1e-6)   # stretch-dominated
+        assert ds.attrs["complete"] and int(ds.attrs["points_failed"]) == 0

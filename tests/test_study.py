@@ -193,6 +193,29 @@ def test_homogenize_task_on_square_cell_scales_with_E(tmp_path):
     assert ds.attrs["cell.name"] == "square" and check_meta(ds) == []
 
 
+def test_process_pool_after_a_computation_in_the_parent(tmp_path):
+    """The usual session: compute something, then run a study on the local pool. Workers forked
+    from a process whose numba / BLAS thread pools had run died on their first kernel
+    (BrokenProcessPool); they start fresh now and give the serial result."""
+    import homtex
+
+    homtex.compress(homtex.load_cell(ROOT / "cells" / "spacer_20mm.toml"), strain=0.02, steps=2)
+    p = write(tmp_path, f"""
+    [study]
+    name = "square_pool"
+    cell = "{ROOT / 'cells' / 'square.toml'}"
+    task = "homogenize"
+    [options]
+    solver = "direct"
+    [parameters]
+    "yarns.strut.radius" = [0.04, 0.05]
+    """)
+    pool = run_study(p, tmp_path / "pool", workers=2, progress=False)
+    serial = run_study(p, tmp_path / "serial", workers=1, progress=False)
+    assert (pool.status.values == 0).all()
+    xr.testing.assert_allclose(pool.C, serial.C, rtol=1e-12)
+
+
 def test_bad_study_files_named(tmp_path):
     with pytest.raises(StudyError, match=r"\[sampling\] key 'method'"):
         load_study(write(tmp_path, SAMPLED.format(method="grid", n=4, seed=1)))
@@ -227,3 +250,30 @@ def test_macro_study_with_curve_file(tmp_path):
     assert ds.force.dims == ("height_scatter", "step")
     # no seams: the closed form F = 40 kPa * strain * 12100 mm^2, independent of the scatter
     np.testing.assert_allclose(ds.force.values, 40.0 * ds.strain.values * 12100.0 * 1e-3, rtol=1e-12)
+
+
+def test_a_dead_worker_is_a_clear_error_and_finished_points_stay(tmp_path, monkeypatch):
+    """A worker killed outside Python (here: os._exit, as the OOM killer would) cannot be
+    attributed to a point: the study stops with a StudyError that says how many points are kept,
+    and a rerun without the crash resumes to the uninterrupted result."""
+    (tmp_path / "crashy.py").write_text(textwrap.dedent("""
+        import os
+        from homtex.study import analytic_task
+
+        def task(cell=None, *, x=0.0, y=0.0, **kw):
+            if x > 2.5 and os.environ.get("HOMTEX_TEST_CRASH"):
+                os._exit(9)
+            return analytic_task(cell, x=x, y=y, **kw)
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    monkeypatch.setenv("HOMTEX_TEST_CRASH", "1")
+    p = write(tmp_path, GRID.format(sleep=0.0).replace('task = "analytic"', 'task = "crashy:task"')
+              .replace("fail_above = 2.5\n", ""))
+    with pytest.raises(StudyError, match=r"worker process died.*points are finished and kept"):
+        run_study(p, tmp_path / "out", workers=2, progress=False)
+    monkeypatch.delenv("HOMTEX_TEST_CRASH")
+    resumed = run_study(p, tmp_path / "out", workers=2, progress=False)
+    full = run_study(p, tmp_path / "full", workers=1, progress=False)
+    xr.testing.assert_identical(resumed, full)
+    assert (full.status.values == 0).all()
