@@ -4,7 +4,7 @@ segment and with the contact penalty.
 Modulus: line fit of the yarn-level stress-strain curve over 0-20 % (the linear range), default
 contact (pdas, augmented Lagrangian: exact gaps) and penalty contact at growing penalties.
 Cushion height and seam-line height: yarn-level seam cell, d = 24 mm, the cell's nominal
-pre-strain. Errors are relative to the finest resolution / to the augmented (exact-gap) result.
+pre-strain, against elements per segment and against the penalty. Errors are relative to the finest resolution / to the augmented (exact-gap) result.
 
 Usage: python studies/convergence_spacer.py [OUTDIR] [--full]      (default results/convergence_spacer/)
 """
@@ -42,7 +42,7 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     base = homtex.load_cell("spacer_20mm")
     res_list = [1, 2, 3, 4, 6, 8] if full else [1, 2, 3, 4, 6]
-    seam_res = [1, 2, 3, 4] if full else [1, 2, 3]
+    seam_res = [1, 2, 3, 4, 6] if full else [1, 2, 3]
     pen_factors = [1e-1, 1e0, 1e1, 1e2, 1e3]
     t0 = time.perf_counter()
     mod_r = [modulus(base.replace(**{"resolution.elements_per_segment": n})) for n in res_list]
@@ -56,6 +56,18 @@ def main(argv=None):
 
     k0 = ContactSolver(base.frame, None, None, homtex.Contact()).k   # the default penalty, N/mm
     mod_p = [modulus(base, homtex.Contact(enforcement="penalty", penalty=f * k0)) for f in pen_factors]
+    # the seam cell with penalty contact (exact gaps: the default augmented Lagrangian)
+    cush_p, seam_p = [], []
+    for f in pen_factors:
+        try:
+            p = homtex.seam_profile(base, seam_distance=24.0,
+                                    contact=homtex.Contact(enforcement="penalty", penalty=f * k0))
+            okp = p.attrs.get("status", "ok") == "ok"
+        except homtex.SolverError as err:   # a too-soft penalty is detected and named
+            print(f"  seam cell, penalty x{f:g}: {str(err)[:100]}")
+            okp = False
+        cush_p.append(float(p.cushion_height) if okp else np.nan)
+        seam_p.append(float(p.seam_height) if okp else np.nan)
     seconds = time.perf_counter() - t0
 
     mod_r, mod_p = np.array(mod_r), np.array(mod_p)
@@ -75,7 +87,11 @@ def main(argv=None):
                                 {"units": "kPa", "long_name": "compression modulus, penalty contact"}),
          "modulus_error_vs_penalty": ("penalty_factor", err_p,
                                       {"units": "1", "long_name": "relative difference to augmented Lagrangian"}),
-         "modulus_augmented": ((), exact, {"units": "kPa", "long_name": "compression modulus, augmented Lagrangian"})},
+         "modulus_augmented": ((), exact, {"units": "kPa", "long_name": "compression modulus, augmented Lagrangian"}),
+         "cushion_height_vs_penalty": ("penalty_factor", np.array(cush_p),
+                                       {"units": "mm", "long_name": "cushion height, d = 24 mm, penalty contact"}),
+         "seam_height_vs_penalty": ("penalty_factor", np.array(seam_p),
+                                    {"units": "mm", "long_name": "seam-line height, d = 24 mm, penalty contact"})},
         coords={"elements_per_segment": ("elements_per_segment", res_list,
                                          {"units": "1", "long_name": "elements per control segment"}),
                 "seam_elements_per_segment": ("seam_elements_per_segment", seam_res,
@@ -85,7 +101,7 @@ def main(argv=None):
         attrs={"seconds": seconds, "default_penalty_N_per_mm": k0})
     write_netcdf(ds, out / "convergence_spacer.nc")
 
-    fig, ax = plt.subplots(1, 3, figsize=(14, 4))
+    fig, ax = plt.subplots(1, 4, figsize=(18, 4))
     ok = err_r > 0
     ax[0].loglog(np.array(res_list)[ok], err_r[ok], "o-")
     ax[0].set(xlabel="elements per segment", ylabel="relative modulus difference to finest",
@@ -98,6 +114,16 @@ def main(argv=None):
     ax[2].loglog(np.array(pen_factors)[ok], err_p[ok], "o-")
     ax[2].set(xlabel="penalty / default", ylabel="relative modulus difference to augmented",
               title="penalty contact converges to exact gaps")
+    # exact gaps at the default resolution (2 elements per segment) is the reference
+    i2 = seam_res.index(2)
+    dc = np.abs(np.array(cush_p) - cush[i2])
+    dsl = np.abs(np.array(seam_p) - seam[i2])
+    pf = np.array(pen_factors)
+    ax[3].loglog(pf[dc > 0], dc[dc > 0], "o-", label="cushion height")
+    ax[3].loglog(pf[dsl > 0], dsl[dsl > 0], "s-", label="seam-line height")
+    ax[3].set(xlabel="penalty / default", ylabel="|penalty - exact gaps|, mm",
+              title="seam cell d = 24 mm vs contact penalty")
+    ax[3].legend()
     fig.tight_layout()
     fig.savefig(out / "convergence_spacer.png", dpi=110)
     plt.close(fig)
