@@ -74,7 +74,9 @@ def cmd_seam(args) -> None:
 
     ds, paths = seam_cell(args.cell, _out(args, "results/seam"), seam_distance=args.distance,
                           prestrain=args.prestrain, method=args.method)
-    _say(f"cushion height {float(ds['cushion_height']):.2f} mm")
+    _say(f"cushion height {float(ds['cushion_height']):.2f} mm, seam line {float(ds['seam_height']):.2f} mm "
+         f"({ds.attrs['method']} model, eps0 = {float(ds['prestrain']):.3g}, status {ds.attrs.get('status', 'ok')})")
+    _say(f"  note: {ds.attrs['validity']}")
     for p in paths:
         _say(f"  wrote {p}")
 

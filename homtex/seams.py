@@ -234,6 +234,8 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
                     description="surface layers as beams on a linear Winkler foundation (pile), periodic stitch "
                     "forces; eps0 = the machine's needle-thread tension (assumption), layer rigidity "
                     "calibrated once on d = 24 mm",
+                    validity="cushion heights: calibrated at d = 24 mm (14.33 mm), other d are predictions of "
+                    "this model; eps0 = 0.40 is the paper's machine setting read as a strain (README 'Seams')",
                     status="ok", effective_seam_distance_mm=d,
                     seam_distance_mm=d, stitch_length_mm=s, thickness_mm=H, foundation_modulus_MPa=Ec,
                     layer_rigidity_Nmm2=D, beta_per_mm=beta, stitch_EA_N=EA)
@@ -512,6 +514,9 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
         coords={"x": ("x", x, {"units": "mm", "long_name": "position across the seam (0 = seam line)"})})
     ds.attrs.update(
         model="yarn", method="yarn", status=status,
+        validity="the yarn-level seam dips only locally (decay length ~2.6 mm): the cushion stays near the "
+        "fabric thickness and does NOT reproduce measured cushion heights; eps0 is a nominal value, not "
+        "calibrated (README 'Seams'; method='foundation' is the calibrated model)",
         description="yarn-level seam cell (lock stitch 301, pre-strained stitch yarn, yarn-yarn contact; "
         + ("co-rotational beams, Newton iterations per load step)" if geometry == "nonlinear" else
            "geometrically linear beams, contact re-linearised per load step)"), geometry=geometry,
