@@ -710,7 +710,9 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
                     requested_seam_distance_mm=float(info["requested_seam_distance"]), prestrain=eps0,
                     cushion_height_mm=float(np.nanmax(h_sewn)), seam_height_mm=float(h_sewn[nb // 2]),
                     seconds=time.perf_counter() - t0, n_nodes=int(frame.n_nodes), tension_only=int(tension_only))
-    return ds
+    from .contact.compress import flag_force_drops
+
+    return flag_force_drops(ds, what=f"seam_compression d = {float(info['seam_distance']):.4g} mm, eps0 = {eps0:g}")
 
 
 class _SlackThreads:

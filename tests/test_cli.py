@@ -28,6 +28,7 @@ def test_run_quick_writes_the_paper_study(tmp_path):
     with xr.open_dataset(tmp_path / "unseamed_compression.nc") as ds:
         s = ds.stress.sel(strain=slice(0, 0.3)).values
         assert ds.attrs["status"] == "ok" and (np.diff(s) > 0).all()   # stiff, monotone to 30 %
+        assert ds.attrs["force_drop_max"] == 0.0                       # and beyond: no snap, no step artefact
     with xr.open_dataset(tmp_path / "cushions.nc") as ds:
         # the foundation model is calibrated on 24 mm: it reproduces 14.33 mm there
         assert float(ds.cushion_height_foundation.sel(case="d=24")) == pytest.approx(14.33, abs=0.05)

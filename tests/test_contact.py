@@ -374,3 +374,35 @@ def test_ill_conditioning_from_a_huge_penalty_is_detected_not_returned():
     with pytest.raises(SolverError, match="ill-conditioned"):
         homtex.solve_static(fr, fixed, loads, solver="direct",
                             contact=Contact(enforcement="penalty", penalty=1e12 / fB))
+
+
+def test_force_drops_are_flagged_with_where_and_how_much():
+    """A displacement-controlled curve whose force falls on the way gets the drop, where it ends
+    and a warning; a monotone curve gets 0 and no warning (the quick main job asserts its curves
+    are monotone this way)."""
+    import warnings
+
+    import xarray as xr
+
+    from homtex.contact.compress import flag_force_drops
+
+    e = np.linspace(0.01, 0.1, 10)
+
+    def curve(f):
+        return xr.Dataset({"force": ("strain", np.asarray(f, float))}, coords={"strain": e})
+
+    mono = np.array([1, 2, 4, 7, 9, 12, 15, 19, 22, 30], float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ds = flag_force_drops(curve(mono))
+    assert ds.attrs["force_drop_max"] == 0.0 and "check" not in ds.attrs
+    snap = mono.copy()
+    snap[5:] = [23.3, 16.8, 19.6, 22.1, 30.0]          # the eps0 = 0.4 seam cell with 30 steps, kPa
+    with pytest.warns(UserWarning, match=r"falls by 27\.9 %.*strain 0\.07 \(step 7 of 10\)"):
+        ds = flag_force_drops(curve(snap))
+    assert ds.attrs["force_drop_max"] == pytest.approx(1 - 16.8 / 23.3)
+    assert ds.attrs["force_drop_strain"] == pytest.approx(0.07)
+    wiggle = mono.copy()
+    wiggle[6] = 11.9                                   # 0.8 % below the force reached: below the threshold
+    ds = flag_force_drops(curve(wiggle))
+    assert 0 < ds.attrs["force_drop_max"] < 0.02 and "check" not in ds.attrs

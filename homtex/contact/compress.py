@@ -280,12 +280,47 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         rec["group_energy"].append([float(tot[mk].sum()) for mk in masks])
     bar.close()
     seconds = time.perf_counter() - t0
-    return _dataset(xr, rec, names, status, dict(
+    ds = _dataset(xr, rec, names, status, dict(
         control=control, thickness_mm=H0, area_mm2=area, area_source=area_source,
         strategy=contact.strategy, enforcement=contact.enforcement, penalty_N_per_mm=cs.k,
         bottom_plate_z_mm=z_lo, top_plate_z_mm=z_lo + H0, solver=solver, seconds=seconds, geometry=geometry,
         supports=str(fix), steps_requested=int(len(targets)), stabilize=float(stabilize), initial_overlap=contact.initial_overlap,
         initial_overlaps=int(cs.initial_overlaps), initial_overlap_max_mm=cs.initial_overlap_max))
+    if control == "displacement":
+        flag_force_drops(ds, what="compress")
+    return ds
+
+
+def flag_force_drops(ds, *, rel: float = 0.02, what: str = "curve"):
+    """Mark a displacement-controlled curve whose force falls on the way (in place; returns ds).
+
+    A drop of more than ``rel`` x the force reached so far is either a snap-through (physical:
+    a yarn buckles or slips past another) or an artefact of a load step too large for the
+    per-step re-linearised contact; the two differ in that the artefact moves with the step
+    count. ``attrs``: ``force_drop_max`` (largest drop / force reached, 0 for a monotone curve),
+    ``force_drop_strain`` (where it ends, NaN if none) and, above ``rel``, ``check`` (message,
+    also warned).
+    """
+    import warnings
+
+    f = np.asarray(ds["force"].values, dtype=float)
+    e = np.asarray(ds["strain"].values, dtype=float)
+    ds.attrs["force_drop_max"] = 0.0
+    ds.attrs["force_drop_strain"] = float("nan")
+    if len(f) < 2 or not np.all(np.isfinite(f)):
+        return ds
+    top = np.maximum.accumulate(f)
+    drop = np.where(top > 0, (top - f) / np.where(top > 0, top, 1.0), 0.0)
+    k = int(np.argmax(drop))
+    ds.attrs["force_drop_max"] = float(drop[k])
+    if drop[k] > rel:
+        ds.attrs["force_drop_strain"] = float(e[k])
+        msg = (f"{what}: the force falls by {100 * drop[k]:.1f} % of the force reached, ending at strain "
+               f"{e[k]:.4g} (step {k + 1} of {len(f)}): a snap-through or a load step too large for the "
+               "re-linearised contact; run it again with twice the steps - an artefact moves, a snap stays")
+        ds.attrs["check"] = msg
+        warnings.warn(msg, UserWarning, stacklevel=3)
+    return ds
 
 
 def _targets(v, steps, name):
