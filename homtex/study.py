@@ -415,12 +415,13 @@ def _run_point(job: dict) -> dict:
     if job.get("threads"):  # one point per process: no nested BLAS/numba thread pools
         _limit_threads(int(job["threads"]))
     t0 = time.perf_counter()
-    status, error = STATUS_OK, ""
+    status, error, check = STATUS_OK, "", ""
     try:
         cell = _point_cell(job["cell"], job["cell_values"])
         ds = get_task(job["task"])(cell, **job["options"])
         if not isinstance(ds, xr.Dataset):
             raise InputError(f"task {job['task']!r} returned {type(ds).__name__}, not an xarray Dataset")
+        check = str(ds.attrs.get("check", ""))   # a warning the result carries (e.g. a force drop)
         ds = ds.copy()
         ds.attrs = {}
     except Exception as exc:  # noqa: BLE001 - a failed point is recorded, not raised
@@ -429,6 +430,7 @@ def _run_point(job: dict) -> dict:
     seconds = time.perf_counter() - t0
     ds["status"] = ((), np.int8(status), {"units": "1", "long_name": "point status (0 ok, 1 failed)"})
     ds["error"] = ((), error, {"units": "1", "long_name": "error message of a failed point"})
+    ds["check"] = ((), check, {"units": "1", "long_name": "warning of the point's result"})
     ds.attrs = {"point_key": job["key"], "index": job["index"], "seconds": seconds,
                 "homtex_version": __version__}
     write_netcdf(ds, job["file"])
@@ -556,7 +558,8 @@ def combine_points(study: Study, points: list):
     """One Dataset from the per-point Datasets (None: not run yet) of ``study``.
 
     Grids: the parameters become dimensions (C order); samples: a ``sample`` dimension with
-    the parameters as coordinates. ``status`` (0 ok, 1 failed, -1 not run) and ``error``;
+    the parameters as coordinates. ``status`` (0 ok, 1 failed, -1 not run), ``error`` and
+    ``check`` (a warning the point's result carried, e.g. a force drop);
     values of failed/missing points are masked (NaN, '' for strings).
     """
     import xarray as xr
@@ -565,20 +568,25 @@ def combine_points(study: Study, points: list):
 
     status = np.array([STATUS_PENDING if p is None else int(p["status"]) for p in points], dtype=np.int8)
     errors = np.array(["not run" if p is None else str(p["error"].values) for p in points], dtype=object)
-    ok = [p.drop_vars(["status", "error"]) for p, s in zip(points, status) if s == STATUS_OK]
+    checks = np.array(["" if p is None or "check" not in p else str(p["check"].values) for p in points],
+                      dtype=object)
+    meta = ["status", "error", "check"]
+    ok = [p.drop_vars(meta, errors="ignore") for p, s in zip(points, status) if s == STATUS_OK]
     if ok:
         tmpl = _fill_like(ok[0])
-        parts = [p.drop_vars(["status", "error"]) if s == STATUS_OK else tmpl
+        parts = [p.drop_vars(meta, errors="ignore") if s == STATUS_OK else tmpl
                  for p, s in zip(points, status)]
         ds = xr.concat(parts, dim="sample", data_vars="all", coords="minimal", compat="override",
                        join="outer", combine_attrs="drop", fill_value=np.nan)
     else:
         ds = xr.Dataset()
-    ds = ds.assign(status=("sample", status), error=("sample", errors))
+    ds = ds.assign(status=("sample", status), error=("sample", errors), check=("sample", checks))
     ds["status"].attrs = {"units": "1", "long_name": "point status (0 ok, 1 failed, -1 not run)"}
     ds["error"].attrs = {"units": "1", "long_name": "error message of a failed point ('' if ok)"}
+    ds["check"].attrs = {"units": "1", "long_name": "warning the point's result carries, e.g. a force drop "
+                         "('' if none)"}
     for name in ds.data_vars:
-        if name not in ("status", "error") and ds[name].dtype.kind == "f":
+        if name not in meta and ds[name].dtype.kind == "f":
             ds[name].attrs["masked_where"] = "status != 0"
     if study.layout == "grid":
         shape = [len(study.grid[k]) for k in study.names]

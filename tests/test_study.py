@@ -277,3 +277,26 @@ def test_a_dead_worker_is_a_clear_error_and_finished_points_stay(tmp_path, monke
     full = run_study(p, tmp_path / "full", workers=1, progress=False)
     xr.testing.assert_identical(resumed, full)
     assert (full.status.values == 0).all()
+
+
+def test_a_warning_of_a_point_result_is_kept(tmp_path, monkeypatch):
+    """A point whose result carries a warning (attrs "check", e.g. a compression curve whose
+    force drops) keeps it in the study's ``check`` variable; the others read ''."""
+    (tmp_path / "warny.py").write_text(textwrap.dedent("""
+        from homtex.study import analytic_task
+
+        def task(cell=None, *, x=0.0, y=0.0, **kw):
+            ds = analytic_task(cell, x=x, y=y, **kw)
+            if x > 1.5:
+                ds.attrs["check"] = f"force drop at x = {x:g}"
+            return ds
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    p = write(tmp_path, GRID.format(sleep=0.0).replace('task = "analytic"', 'task = "warny:task"')
+              .replace("fail_above = 2.5\n", ""))
+    ds = run_study(p, tmp_path / "out", workers=1, progress=False)
+    assert (ds.status.values == 0).all()
+    for x in ds.x.values:
+        want = f"force drop at x = {x:g}" if x > 1.5 else ""
+        assert set(ds.check.sel(x=x).values.ravel()) == {want}
+    assert check_meta(ds) == []
