@@ -397,7 +397,7 @@ def test_force_drops_are_flagged_with_where_and_how_much():
         ds = flag_force_drops(curve(mono))
     assert ds.attrs["force_drop_max"] == 0.0 and "check" not in ds.attrs
     snap = mono.copy()
-    snap[5:] = [23.3, 16.8, 19.6, 22.1, 30.0]          # the eps0 = 0.4 seam cell with 30 steps, kPa
+    snap[5:] = [23.3, 16.8, 19.6, 22.1, 30.0]          # the eps0 = 0.4 seam cell before it settled, kPa
     with pytest.warns(UserWarning, match=r"falls by 27\.9 %.*strain 0\.07 \(step 7 of 10\)"):
         ds = flag_force_drops(curve(snap))
     assert ds.attrs["force_drop_max"] == pytest.approx(1 - 16.8 / 23.3)

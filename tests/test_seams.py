@@ -192,9 +192,11 @@ def test_pdas_keeps_a_part_held_on_the_first_small_plate_step(cell, monkeypatch)
     assert np.all(np.isfinite(s)) and np.all(np.diff(s) > 0) and s[0] > 0
     small = seam_compression(cell, seam_distance=24.0, prestrain=0.4, strain=0.02, steps=4)
     assert small.attrs["status"] == "ok" and small.sizes["strain"] == 4
-    # (the outermost stitch loop gives way by ~0.05 mm before the plate meets resistance)
+    # the specimen settles between the touching plates before the test (a stitch loop that the
+    # ramp's pin held sank 0.19 mm, so the first plate step used to meet nothing): force from step 1
     ss = small.stress.values
-    assert np.all(np.isfinite(ss)) and np.all(np.diff(ss) >= 0) and ss[-1] > 0
+    assert np.all(np.isfinite(ss)) and np.all(np.diff(ss) > 0) and ss[0] > 0
+    assert small.attrs["force_drop_max"] == 0.0
 
 
 # ---------------------------------------------------------------- foundation model (analytical)
