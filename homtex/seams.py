@@ -637,10 +637,16 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
         else:
             u = np.zeros((frame.n_nodes, 6))
         _, h_sewn = measure_profile(frame, info, u)
-        x = frame.nodes + u[:, :3]
-        z_lo = float((x[:, 2] - rn).min())
-        z_hi = float((x[:, 2] + rn).max())
-        H0 = z_hi - z_lo
+
+        def touch(u):
+            """Both plates onto the outermost yarn surfaces of state u; returns (H0, top displacement)."""
+            x = frame.nodes + u[:, :3]
+            z_lo = float((x[:, 2] - rn).min())
+            z_hi = float((x[:, 2] + rn).max())
+            ss.cs.set_plate(0, displacement=z_lo - bottom.z)
+            ss.cs.set_plate(1, displacement=z_hi - top.z)
+            return z_hi - z_lo, z_hi - top.z
+
         # the plates now hold the vertical position: free the interlock's uz (its reaction was zero,
         # the sewn state is self-equilibrated) so that plate loads on the stitch reach the fabric
         from .contact.solve import ContactSolver
@@ -648,22 +654,18 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
         fix = dict(ss.fixed)
         fix[int(info["interlock_nodes"][0])] = [0, 1]
         ss.cs = ContactSolver(frame, fix, None, ss.contact, plates=[bottom, top], solver="direct")
-        ss.cs.set_plate(0, displacement=z_lo - bottom.z)
-        d_top0 = z_hi - top.z
-        ss.cs.set_plate(1, displacement=d_top0)
         slack = _SlackThreads(frame, info, ss.cs)
+
+        def solve_step():
+            return slack.solve(ss) if tension_only else ss._solve(1.0)
+
+        H0, d_top0 = touch(u)
         # settle with both plates just touching: freeing the interlock lets a stitch loop that the
         # pin held give way (at eps0 = 0.4 the outermost loop sank 0.19 mm at zero force, so the
         # first plate step met nothing); H0 is the settled specimen's thickness
-        res0 = slack.solve(ss) if tension_only else ss._solve(1.0)
+        res0 = solve_step()
         ss._accept(res0, 1.0)
-        x = frame.nodes + res0.u[:, :3]
-        z_lo = float((x[:, 2] - rn).min())
-        z_hi = float((x[:, 2] + rn).max())
-        H0 = z_hi - z_lo
-        ss.cs.set_plate(0, displacement=z_lo - bottom.z)
-        d_top0 = z_hi - top.z
-        ss.cs.set_plate(1, displacement=d_top0)
+        H0, d_top0 = touch(res0.u)
         e_done = 0.0
         de = float(strain) / int(steps)
         cuts = 0
@@ -672,7 +674,7 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
             e = min(float(strain), e_done + de)
             ss.cs.set_plate(1, displacement=d_top0 - e * H0)
             try:
-                res = slack.solve(ss) if tension_only else ss._solve(1.0)
+                res = solve_step()
             except (SolverError, np.linalg.LinAlgError) as err:
                 if cuts < 3:
                     cuts += 1

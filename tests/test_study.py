@@ -167,15 +167,22 @@ def test_sampled_study_dataset(tmp_path):
     assert ds.x.attrs["units"] == "mm" and check_meta(ds) == []
 
 
+def square_study(tmp_path, name, parameters):
+    """A homogenize study of the square verification lattice; ``parameters``: TOML lines."""
+    head = textwrap.dedent(f"""
+        [study]
+        name = "{name}"
+        cell = "{ROOT / 'cells' / 'square.toml'}"
+        task = "homogenize"
+        [options]
+        solver = "direct"
+        [parameters]
+        """)
+    return write(tmp_path, head + textwrap.dedent(parameters).lstrip("\n"))
+
+
 def test_homogenize_task_on_square_cell_scales_with_E(tmp_path):
-    p = write(tmp_path, f"""
-    [study]
-    name = "square_E"
-    cell = "{ROOT / 'cells' / 'square.toml'}"
-    task = "homogenize"
-    [options]
-    solver = "direct"
-    [parameters]
+    p = square_study(tmp_path, "square_E", """
     "yarns.strut.E" = [1000.0, 3000.0]
     "yarns.strut.radius" = [0.04, 0.05]
     """)
@@ -200,14 +207,7 @@ def test_process_pool_after_a_computation_in_the_parent(tmp_path):
     import homtex
 
     homtex.compress(homtex.load_cell(ROOT / "cells" / "spacer_20mm.toml"), strain=0.02, steps=2)
-    p = write(tmp_path, f"""
-    [study]
-    name = "square_pool"
-    cell = "{ROOT / 'cells' / 'square.toml'}"
-    task = "homogenize"
-    [options]
-    solver = "direct"
-    [parameters]
+    p = square_study(tmp_path, "square_pool", """
     "yarns.strut.radius" = [0.04, 0.05]
     """)
     pool = run_study(p, tmp_path / "pool", workers=2, progress=False)
