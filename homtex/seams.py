@@ -19,8 +19,8 @@ Two models:
     eps0 = 0.40, the sewing machine's needle-thread tension of the paper's Table 1 read as the
     stitch pre-strain (an assumption, not fitted), and the layer rigidity calibrated ONCE on
     d = 24 mm (14.33 mm, :func:`calibrate_layer_rigidity`); 18 and 43 mm are then predictions
-    (12.11 and 20.15 mm against the paper's 10.23 / 20.3 and the measured 8-12 / 20 mm). The
-    calibrated rigidity (107 N mm^2 per stitch) is 26x the sum of the layer yarns' own and 140x
+    (12.23 and 20.05 mm against the paper's 10.23 / 20.3 and the measured 8-12 / 20 mm). The
+    calibrated rigidity (230 N mm^2 per stitch) is 56x the sum of the layer yarns' own and 150x
     what the yarn-level cell shows (studies/seam_length_scale.py): the model says what the
     layer would have to be, not what the yarns give.
 
@@ -29,8 +29,10 @@ Foundation model (a documented simplification, not a yarn-level seam solve)
 A seam cell spans one seam distance d across the seam (x) and one stitch length s
 along it (y). Each surface layer is an Euler-Bernoulli strip of bending rigidity D
 (N mm^2 per stitch length, from the layer's yarns) resting on the pile, a linear
-Winkler foundation of stiffness k = E_c s / H (N/mm per mm of x; E_c the fabric's
-compression modulus from the unseamed yarn-level cell, H its thickness). Both layers
+Winkler foundation of stiffness k = 2 E_c s / H (N/mm per mm of x; E_c the fabric's
+compression modulus from the unseamed yarn-level cell, H its thickness: a layer that moves by w
+towards the mid-plane while the other layer moves by w too compresses the pile by 2 w, a strain
+2 w / H). Both layers
 are pulled towards the mid-plane by the stitch: one point force P per stitch and layer,
 repeated every d (periodic). The layer deflection is the periodic Green's function of a
 beam on an elastic foundation,
@@ -196,7 +198,7 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
     EA = ys.E * math.pi * ys.a * ys.b
     H = float(cell.info["thickness"])
     Ec = fabric_modulus(cell)
-    k = Ec * s / H
+    k = 2.0 * Ec * s / H     # both layers move by w: pile strain 2 w / H
     D = float(seam["layer_rigidity"]) if "layer_rigidity" in seam else layer_rigidity(cell, s)
     beta = (k / (4.0 * D)) ** 0.25
     g0 = float(_green(np.array([0.0]), d, beta, k)[0])

@@ -70,7 +70,7 @@ def main(out: Path) -> xr.Dataset:
     H = float(cell.info["thickness"])
     s = float(cell.parameters["seam"]["stitch_length"])
     Ec = fabric_modulus(cell)                  # MPa, unseamed yarn-level cell
-    k = Ec * s / H                             # N/mm per mm of x over one stitch length
+    k = 2.0 * Ec * s / H                       # N/mm per mm of x over one stitch length (pile strain 2 w / H)
     D_yarn = layer_rigidity(cell, s)           # N mm^2 per stitch length, sum over the layer's yarns
     lam_yarnsum = (4 * D_yarn / k) ** 0.25
     ds_list, rows = [], []

@@ -260,3 +260,14 @@ def test_cycling_active_set_is_resolved_one_contact_at_a_time(cell):
     assert c.force.min(initial=0.0) >= 0.0
     loaded = c.force > 1e-9 * c.force.max()
     assert np.abs(c.gap_final[loaded]).max() < 10 * tol
+
+
+def test_foundation_force_balance(cell):
+    """The pile carries the stitch pull: the mean compression over a seam cell is the stitch force
+    per layer over the cell area, through the fabric's modulus: mean(H - h) = H P / (E_c d s)."""
+    for d in (18.0, 43.0):
+        ds = homtex.seam_profile(cell, seam_distance=d, method="foundation", points=2001)
+        H, s = ds.attrs["thickness_mm"], ds.attrs["stitch_length_mm"]
+        deficit = H - ds.height.values[:-1].mean()   # x spans one period, both ends included
+        expect = H * float(ds.stitch_force) / (ds.attrs["foundation_modulus_MPa"] * d * s)
+        assert deficit == pytest.approx(expect, rel=2e-3)
