@@ -15,6 +15,8 @@ Schema::
     E = 3000.0                     # MPa
     nu = 0.3
     contact_radius = 0.1           # optional, mm
+    bending_factor = 1.0           # optional: bending rigidity / the solid section's (default 1)
+    torsion_factor = 1.0           # optional: torsional rigidity / the solid section's (default 1)
     source = "where the numbers come from"
     [resolution]
     elements_per_strut = 4         # generator-specific keys
@@ -62,7 +64,8 @@ GENERATORS: dict[str, str] = {
 
 TABLES = ("cell", "parameters", "yarns", "resolution")
 CELL_KEYS = ("name", "generator", "description")
-YARN_KEYS = ("section", "radius", "semi_axes", "E", "nu", "contact_radius", "source")
+YARN_KEYS = ("section", "radius", "semi_axes", "E", "nu", "contact_radius", "source", "bending_factor",
+             "torsion_factor")
 
 
 class CellError(InputError):
@@ -234,8 +237,10 @@ def _yarn(name: str, d: dict) -> YarnType:
     nu = get_number(d, "nu", table, gt=-1.0, lt=0.5)
     rc = get_number(d, "contact_radius", table, gt=0, required=False)
     source = get_str(d, "source", table)
+    bf = get_number(d, "bending_factor", table, gt=0, default=1.0)
+    tf = get_number(d, "torsion_factor", table, gt=0, default=1.0)
     return YarnType(name=name, radius=float(radius), E=E, nu=nu, contact_radius=rc,
-                    semi_axes=semi, source=source)
+                    semi_axes=semi, source=source, bending_factor=float(bf), torsion_factor=float(tf))
 
 
 def _resolve(generator: str, file):

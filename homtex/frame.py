@@ -62,11 +62,16 @@ class Frame:
     prestrain : float or array (m,), optional
         Initial axial shortening strain eps0: the element wants to be shorter by
         eps0 (positive values pre-stress it in tension when its ends are held).
+    bending_factor, torsion_factor : float or array (m,), optional
+        Multiply the bending second moments Iy, Iz and the torsion constant J of the section
+        (default 1: the solid section). A multifilament bundle bends and twists more easily
+        than a solid rod of its section (its fibres slide) and more stiffly than its fibres
+        alone; the axial stiffness stays that of the section.
     """
 
     def __init__(self, nodes, elements, *, radius=None, E=None, nu=None, yarn=None,
                  semi_axes=None, ref=None, periods=None, images=None,
-                 contact_radius=None, prestrain=None):
+                 contact_radius=None, prestrain=None, bending_factor=None, torsion_factor=None):
         nodes = np.ascontiguousarray(np.asarray(nodes, dtype=float))
         if nodes.ndim != 2 or nodes.shape[1] != 3:
             raise InputError(f"nodes must have shape (n, 3), got {nodes.shape}")
@@ -149,6 +154,14 @@ class Frame:
         if not np.isfinite(self.prestrain).all():
             e = _first_bad(~np.isfinite(self.prestrain))
             raise InputError(f"prestrain of element {e} is not finite")
+        self.bending_factor = _per_element(1.0 if bending_factor is None else bending_factor, m, "bending_factor")
+        self.torsion_factor = _per_element(1.0 if torsion_factor is None else torsion_factor, m, "torsion_factor")
+        for name, arr in (("bending_factor", self.bending_factor), ("torsion_factor", self.torsion_factor)):
+            bad = ~(np.isfinite(arr) & (arr > 0))
+            if bad.any():
+                e = _first_bad(bad)
+                raise InputError(f"{name} of element {e} (yarn {self.yarn[e]}) must be positive and finite, "
+                                 f"got {arr[e]}")
 
         # geometry checks
         d = self.element_vectors
@@ -186,6 +199,9 @@ class Frame:
         self.R = np.ascontiguousarray(np.stack([e1, e2, e3], axis=1))
         props = section_properties(self.a, self.b, self.nu)
         self.A, self.Iy, self.Iz, self.J, self.k = (props[x] for x in ("A", "Iy", "Iz", "J", "k"))
+        self.Iy = np.ascontiguousarray(self.Iy * self.bending_factor)
+        self.Iz = np.ascontiguousarray(self.Iz * self.bending_factor)
+        self.J = np.ascontiguousarray(self.J * self.torsion_factor)
         self.G = self.E / (2.0 * (1.0 + self.nu))
 
     # ------------------------------------------------------------------
@@ -253,7 +269,8 @@ class Frame:
         """A copy with some constructor arguments replaced (e.g. ``prestrain=...``)."""
         kw = dict(nodes=self.nodes, elements=self.elements, semi_axes=np.column_stack([self.a, self.b]),
                   E=self.E, nu=self.nu, yarn=self.yarn, ref=self.R[:, 1], periods=self.periods,
-                  images=self.images, contact_radius=self.contact_radius, prestrain=self.prestrain)
+                  images=self.images, contact_radius=self.contact_radius, prestrain=self.prestrain,
+                  bending_factor=self.bending_factor, torsion_factor=self.torsion_factor)
         kw.update(changes)
         if "radius" in changes:
             kw.pop("semi_axes")

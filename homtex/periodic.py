@@ -803,7 +803,8 @@ def periodize(frame: Frame, box, *, axes=None, tol: float = 1e-6) -> Frame:
     return Frame(canon[midx], elements[keep], semi_axes=np.column_stack([frame.a, frame.b])[keep],
                  E=frame.E[keep], nu=frame.nu[keep], yarn=frame.yarn[keep], ref=frame.R[keep, 1],
                  periods=periods, images=eimg[keep], contact_radius=frame.contact_radius[keep],
-                 prestrain=frame.prestrain[keep])
+                 prestrain=frame.prestrain[keep], bending_factor=frame.bending_factor[keep],
+                 torsion_factor=frame.torsion_factor[keep])
 
 
 # ----------------------------------------------------------------------------------

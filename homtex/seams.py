@@ -101,7 +101,8 @@ def layer_rigidity(cell, stitch_length: float) -> float:
 
     The yarns that run across the wales (x) in a layer are the inlays and the underlaps of the
     pillar stitches: one of each per course and wale system; each bends about its minor axis
-    (E pi a b^3 / 4). D = s / course_spacing * sum over the layer's ground and inlay bars.
+    (E pi a b^3 / 4, times the yarn type's ``bending_factor``). D = s / course_spacing * sum over
+    the layer's ground and inlay bars.
     """
     info = cell.info
     cs = info["course_spacing"]
@@ -111,7 +112,7 @@ def layer_rigidity(cell, stitch_length: float) -> float:
             continue
         y = cell.yarns[b.yarn]
         a, bb = y.a, y.b
-        D += y.E * math.pi * max(a, bb) * min(a, bb) ** 3 / 4.0
+        D += y.E * y.bending_factor * math.pi * max(a, bb) * min(a, bb) ** 3 / 4.0
     return D * stitch_length / cs
 
 

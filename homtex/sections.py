@@ -68,6 +68,9 @@ class YarnType:
         Radius used by contact, mm; defaults to the section radius (or the larger semi-axis).
     semi_axes : tuple or None
         (a, b) semi-axes of an elliptical section, mm.
+    bending_factor, torsion_factor : float
+        Bending and torsional rigidity relative to the solid section (see :class:`homtex.Frame`),
+        default 1.
     source : str
         Where the values come from (literature reference or "assumption").
     """
@@ -79,6 +82,8 @@ class YarnType:
     contact_radius: float | None = None
     semi_axes: tuple | None = None
     source: str = ""
+    bending_factor: float = 1.0
+    torsion_factor: float = 1.0
 
     @property
     def a(self) -> float:

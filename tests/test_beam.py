@@ -220,3 +220,23 @@ def test_prestrain_equivalent_loads():
     res = homtex.solve_static(f, {0: "all"}, None, solver="direct")
     assert res.u[-1, 0] == pytest.approx(-eps0 * L, rel=1e-10)
     assert np.abs(res.axial_force).max() < 1e-9 * E * p["A"] * eps0
+
+
+@pytest.mark.parametrize("f, g", [(0.1, 1.0), (4.0, 0.05)])
+def test_bending_and_torsion_factors(f, g):
+    """bending_factor multiplies Iy and Iz, torsion_factor J: the cantilever's tip deflection and
+    twist follow the Timoshenko closed forms with f EI and g GJ (shear and axial unchanged)."""
+    P, T, N, r = 3.0, 5.0, 40.0, 2.0
+    p = props(r)
+    fr = line_frame(4, L, E=E, nu=NU, radius=r, bending_factor=f, torsion_factor=g)
+    res = homtex.solve_static(fr, {0: "all"}, {4: (N, P, 2 * P, T, 0, 0)}, solver="direct", tol=1e-12)
+    kGA = p["k"] * p["G"] * p["A"]
+    assert res.u[-1, 1] == pytest.approx(P * L**3 / (3 * f * E * p["Iz"]) + P * L / kGA, rel=1e-8)
+    assert res.u[-1, 2] == pytest.approx(2 * P * L**3 / (3 * f * E * p["Iy"]) + 2 * P * L / kGA, rel=1e-8)
+    assert res.u[-1, 0] == pytest.approx(N * L / (E * p["A"]), rel=1e-8)
+    assert res.u[-1, 3] == pytest.approx(T * L / (g * p["G"] * p["J"]), rel=1e-8)
+    assert np.all(fr.with_(prestrain=0.01).bending_factor == f) and np.all(fr.with_().torsion_factor == g)
+    with pytest.raises(homtex.InputError, match=r"bending_factor of element 0 .* must be positive"):
+        line_frame(2, L, E=E, nu=NU, radius=r, bending_factor=-1.0)
+    with pytest.raises(homtex.InputError, match=r"torsion_factor of element 0 .* must be positive"):
+        line_frame(2, L, E=E, nu=NU, radius=r, torsion_factor=np.inf)

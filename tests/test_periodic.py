@@ -323,6 +323,13 @@ def test_periodize_box_drawn_lattice():
     per2 = periodize(fr, box, axes=[0, 1])
     assert per2.dim_periodic == 2
     assert per2.n_nodes == n * n * (n + 1)
+    # the bending factor survives periodisation: same stiffness as the lattice generator's, and
+    # the shear stiffness of the cubic frame (bending-governed) scales with it
+    per3 = periodize(fr.with_(bending_factor=3.0), box)
+    ref3 = lattice_frame("simple_cubic", a=a, radius=0.1, E=E_WALL, nu=NU_WALL, repeat=(n, n, n), bending_factor=3.0)
+    C3 = homtex.homogenize(per3, solver="direct").C
+    assert np.abs(C3 - homtex.homogenize(ref3, solver="direct").C).max() <= 1e-10 * np.abs(C3).max()
+    assert C3[3, 3] > 2.5 * C1[3, 3] and C3[0, 0] == pytest.approx(C1[0, 0], rel=1e-8)
 
 
 def test_periodize_reports_unpaired_nodes():

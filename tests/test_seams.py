@@ -38,6 +38,28 @@ def test_tiling_preserves_the_fabric(cell):
     assert len(np.unique(t.yarn)) < 6 * len(np.unique(fr.yarn))
 
 
+def test_bending_factor_reaches_the_seam_cell(cell):
+    """A yarn type's bending_factor scales Iy, Iz of its elements (and of the interlacing bonds
+    made of it) in the spacer cell and in the seam cell tiled from it; the stitch keeps 1.
+    torsion_factor scales J alike."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        stiff = cell.replace(**{"yarns.multifilament.bending_factor": 10.0, "yarns.multifilament.torsion_factor": 0.5})
+    g = cell.groups
+    multi = g["pillar"] | g["inlay"] | g["interlacing"]
+    np.testing.assert_allclose(stiff.frame.Iy[multi], 10.0 * cell.frame.Iy[multi], rtol=1e-12)
+    np.testing.assert_allclose(stiff.frame.Iz[multi], 10.0 * cell.frame.Iz[multi], rtol=1e-12)
+    np.testing.assert_allclose(stiff.frame.Iy[~multi], cell.frame.Iy[~multi], rtol=1e-12)
+    np.testing.assert_allclose(stiff.frame.EA, cell.frame.EA, rtol=1e-12)
+    np.testing.assert_allclose(stiff.frame.J, np.where(multi, 0.5, 1.0) * cell.frame.J, rtol=1e-12)
+    fr, info = seam_cell(stiff, seam_distance=D_SMALL, prestrain=0.1)
+    ref, _ = seam_cell(cell, seam_distance=D_SMALL, prestrain=0.1)
+    st = info["groups"]["stitch"]
+    np.testing.assert_allclose(fr.Iy[~st] / ref.Iy[~st], np.where(
+        (info["groups"]["pillar"] | info["groups"]["inlay"] | info["groups"]["interlacing"])[~st], 10.0, 1.0))
+    np.testing.assert_allclose(fr.Iy[st], ref.Iy[st])
+
+
 def test_seam_cell_geometry(cell):
     fr, info = seam_cell(cell, seam_distance=24.0, prestrain=0.2)
     w = cell.info["wale_spacing"]

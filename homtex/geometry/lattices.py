@@ -155,7 +155,8 @@ def strut_normals(d: np.ndarray) -> np.ndarray:
 
 def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_axes=None,
                   elements_per_strut: int = 1, repeat=None, periodic: bool = True,
-                  waviness: float = 0.0, contact_radius=None, **cell_args) -> Frame:
+                  waviness: float = 0.0, contact_radius=None, bending_factor=None, torsion_factor=None,
+                  **cell_args) -> Frame:
     """A beam frame of a lattice.
 
     Parameters
@@ -172,6 +173,8 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
         for planar lattices); the beams are chords of the curved strut, so a wavy
         lattice converges with ``elements_per_strut`` (a straight one is exact at 1).
     contact_radius : contact radius of the struts, mm (default: the section radius).
+    bending_factor, torsion_factor : bending / torsional rigidity relative to the solid section
+        (default 1, :class:`homtex.Frame`).
     """
     if isinstance(cell, str):
         if cell not in GENERATORS:
@@ -212,7 +215,8 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
     normal = strut_normals(x1 - x0) if waviness else None
     inner, el, im = _subdivide(x0, x1, a, b, img, nel, len(nodes), waviness, normal)
     allnodes = np.vstack([nodes, inner])
-    kw = dict(radius=radius, E=E, nu=nu, semi_axes=semi_axes, contact_radius=contact_radius)
+    kw = dict(radius=radius, E=E, nu=nu, semi_axes=semi_axes, contact_radius=contact_radius,
+              bending_factor=bending_factor, torsion_factor=torsion_factor)
     if periodic:
         return Frame(allnodes, el, periods=cell.basis * reps[:, None], images=im, **kw)
     return Frame(allnodes, el, **kw)
@@ -250,7 +254,8 @@ def _build(cell: LatticeCell, parameters, yarns, resolution, table="parameters")
         raise CellError(f"entries must be >= 1, got {repeat.tolist()}", table=table, key="repeat")
     wav = get_number(parameters, "waviness", table, default=0.0, ge=-0.5, le=0.5)
     sec = dict(semi_axes=(y.a, y.b)) if y.semi_axes else dict(radius=y.radius)
-    frame = lattice_frame(cell, E=y.E, nu=y.nu, contact_radius=y.rc, elements_per_strut=nel,
+    frame = lattice_frame(cell, E=y.E, nu=y.nu, contact_radius=y.rc, bending_factor=y.bending_factor,
+                          torsion_factor=y.torsion_factor, elements_per_strut=nel,
                           repeat=repeat, waviness=wav, **sec)
     info = {"lattice": cell.name, "groups": {"struts": np.ones(frame.n_elements, dtype=bool)}}
     return frame, info

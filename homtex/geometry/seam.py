@@ -134,7 +134,8 @@ def tile_frame(frame: Frame, n_x: int, n_y: int, bond=None):
     out = Frame(nodes, np.column_stack([ea, eb]), semi_axes=np.column_stack([rep(frame.a), rep(frame.b)]),
                 E=rep(frame.E), nu=rep(frame.nu), yarn=yarn, ref=np.tile(frame.R[:, 1], (ncp, 1)),
                 periods=np.array([n_x * p[0], n_y * p[1]]), images=images,
-                contact_radius=rep(frame.contact_radius), prestrain=rep(frame.prestrain))
+                contact_radius=rep(frame.contact_radius), prestrain=rep(frame.prestrain),
+                bending_factor=rep(frame.bending_factor), torsion_factor=rep(frame.torsion_factor))
     return out, np.repeat(np.arange(ncp), n), np.repeat(np.arange(ncp), m), np.tile(np.arange(m), ncp)
 
 
@@ -271,7 +272,9 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
                   yarn=np.r_[fab.yarn, np.full(ms, sid)], ref=np.vstack([fab.R[:, 1], ref]),
                   periods=fab.periods, images=np.vstack([fab.images, s_img]),
                   contact_radius=np.r_[fab.contact_radius, np.full(ms, r_s)],
-                  prestrain=np.r_[np.zeros(fab.n_elements), np.full(ms, eps0)])
+                  prestrain=np.r_[np.zeros(fab.n_elements), np.full(ms, eps0)],
+                  bending_factor=np.r_[fab.bending_factor, np.ones(ms)],
+                  torsion_factor=np.r_[fab.torsion_factor, np.ones(ms)])
     m_f = fab.n_elements
     groups = {}
     for g, mask in (cell.groups or {}).items():

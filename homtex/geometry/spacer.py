@@ -709,6 +709,8 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
     a_el = np.array([ytypes[y].a for y in yarn])
     b_el = np.array([ytypes[y].b for y in yarn])
     E_el = np.array([ytypes[y].E for y in yarn])
+    bf_el = np.array([ytypes[y].bending_factor for y in yarn])
+    tf_el = np.array([ytypes[y].torsion_factor for y in yarn])
     nu_el = np.array([ytypes[y].nu for y in yarn])
     rc_el = np.array([ytypes[y].rc for y in yarn])
 
@@ -769,12 +771,15 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
                 a_el = np.concatenate([a_el, rb])
                 b_el = np.concatenate([b_el, rb])
                 E_el = np.concatenate([E_el, np.array([ytypes[y].E for y in gy])])
+                bf_el = np.concatenate([bf_el, np.array([ytypes[y].bending_factor for y in gy])])
+                tf_el = np.concatenate([tf_el, np.array([ytypes[y].torsion_factor for y in gy])])
                 nu_el = np.concatenate([nu_el, np.array([ytypes[y].nu for y in gy])])
                 rc_el = np.concatenate([rc_el, rc_el_yarn[gy_el[gy]]])
         bond_mask = np.arange(len(elements)) >= n_yarn_el
     frame = Frame(nodes, elements, semi_axes=np.column_stack([a_el, b_el]), E=E_el, nu=nu_el, yarn=yarn,
-                  periods=periods, images=images, contact_radius=rc_el, ref=_reference_vectors(
-                      nodes, elements, images @ periods))
+                  periods=periods, images=images, contact_radius=rc_el, bending_factor=bf_el,
+                  torsion_factor=tf_el,
+                  ref=_reference_vectors(nodes, elements, images @ periods))
 
     groups = {}
     is_bond = np.zeros(len(elements), dtype=bool)
