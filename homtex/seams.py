@@ -316,6 +316,36 @@ def measure_profile(frame, info, u=None):
     return centre[order], h[order]
 
 
+def thread_escape(frame, info, u) -> str:
+    """'' if the stitch still holds the fabric between its threads at the seam line, else which
+    thread slipped through its layer (through an opening between the yarns, or a contact missed
+    in a large step): the stitch is then unloaded and the fabric floats, a state the contact
+    solve accepts as an equilibrium.
+
+    Criterion: g = mean height of the layer's nodes within half a wale of the seam line minus the
+    thread's mean height (bottom layer over the bobbin thread; top layer: needle thread minus
+    layer). As sewn, g = g0 > 0 (about a yarn radius). A thread pressed into its layer lowers g a
+    little (the default cell at eps0 = 0.3 ends at g = -0.13 mm for the needle thread, the thread
+    nestled between loop legs); a thread that went through makes g fall by millimetres. Escaped:
+    g < -g0."""
+    Lx = float(frame.periods[0, 0])
+    layer = np.asarray(info["layer"])
+    out = []
+    for side, thread, sign in (("bottom", "bobbin", 1.0), ("top", "needle", -1.0)):
+        nodes = np.unique(frame.elements[layer == side])
+        g = []
+        for xyz in (frame.nodes, frame.nodes + np.asarray(u)[:frame.n_nodes, :3]):
+            dx = (xyz[nodes, 0] - float(info["seam_x"]) + 0.5 * Lx) % Lx - 0.5 * Lx
+            near = nodes[np.abs(dx) < 0.5 * float(info["wale_spacing"])]
+            if not len(near):
+                break
+            g.append(sign * (xyz[near, 2].mean() - xyz[info[f"{thread}_nodes"], 2].mean()))
+        if len(g) == 2 and g[1] < -abs(g[0]):
+            out.append(f"the {thread} thread slipped through the {side} layer: the layer's mean height at the "
+                       f"seam line is {-g[1]:.3g} mm on the wrong side of it (as sewn {g[0]:.3g} mm on the right side)")
+    return "; ".join(out)
+
+
 class SeamSolver:
     """Contact solve of a seam cell with the stitch pre-strain ramped in load steps.
 
@@ -402,7 +432,8 @@ class SeamSolver:
 
     def ramp(self, steps: int = 4, max_cuts: int = 4, time_limit: float | None = None):
         """Raise the pre-strain factor from the current value to 1 in ``steps`` equal steps; a step
-        whose contact solve fails is halved (at most ``max_cuts`` times in a row). ``time_limit``
+        whose contact solve fails, or ends with a thread slipped through its layer
+        (:func:`thread_escape`), is halved (at most ``max_cuts`` times in a row). ``time_limit``
         (s): stop with a SolverError once it is exceeded (the accepted steps are kept).
         Returns the list of (alpha, contact iterations, active contacts) of the accepted steps."""
         import time
@@ -418,6 +449,9 @@ class SeamSolver:
             a = min(1.0, self.alpha + da)
             try:
                 res = self._solve(a)
+                escape = thread_escape(self.frame, self.info, res.u)
+                if escape:
+                    raise SolverError(escape)
             except (SolverError, np.linalg.LinAlgError) as err:
                 if cuts >= max_cuts:
                     raise SolverError(f"seam pre-strain ramp failed at {a:.4g} x eps0 after {cuts} step cuts: "
@@ -660,7 +694,11 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
         slack = _SlackThreads(frame, info, ss.cs)
 
         def solve_step():
-            return slack.solve(ss) if tension_only else ss._solve(1.0)
+            res = slack.solve(ss) if tension_only else ss._solve(1.0)
+            escape = thread_escape(frame, info, res.u)
+            if escape:
+                raise SolverError(escape)
+            return res
 
         H0, d_top0 = touch(u)
         # settle with both plates just touching: freeing the interlock lets a stitch loop that the

@@ -293,3 +293,35 @@ def test_foundation_force_balance(cell):
         deficit = H - ds.height.values[:-1].mean()   # x spans one period, both ends included
         expect = H * float(ds.stitch_force) / (ds.attrs["foundation_modulus_MPa"] * d * s)
         assert deficit == pytest.approx(expect, rel=2e-3)
+
+
+def test_thread_escape_detected(cell):
+    """A thread that has gone through its layer is named; a rigid translation, the sewn state and
+    a thread pressed slightly into its layer are not escapes."""
+    from homtex.seams import thread_escape
+
+    fr, info = seam_cell(cell, seam_distance=D_SMALL, prestrain=0.1)
+    u = np.zeros((fr.n_nodes, 6))
+    assert thread_escape(fr, info, u) == ""
+    u[:, :3] = (0.3, -1.0, 5.0)
+    assert thread_escape(fr, info, u) == ""
+    for thread, dz, side in (("bobbin", 3.0, "bottom"), ("needle", -3.0, "top")):
+        u = np.zeros((fr.n_nodes, 6))
+        u[info[f"{thread}_nodes"], 2] = 0.1 * np.sign(dz)        # pressed into the layer: fine
+        assert thread_escape(fr, info, u) == ""
+        u[info[f"{thread}_nodes"], 2] = dz
+        msg = thread_escape(fr, info, u)
+        assert f"the {thread} thread slipped through the {side} layer" in msg and "; " not in msg
+
+
+def test_ramp_refuses_a_thread_that_went_through(cell):
+    """Inlays over 3 needles with 100x stiffer multifilaments at eps0 = 0.7 (d = 24 mm): the
+    bobbin thread passes between the bottom layer's yarns within the second load step. Before the
+    check the ramp finished with an unloaded stitch (0.002 N), a flat fabric and status 'ok'."""
+    lap = "0-0/3-3//"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = cell.replace(**{"parameters.bars.top_inlay.lapping": lap, "parameters.bars.bottom_inlay.lapping": lap,
+                            "yarns.multifilament.bending_factor": 100.0, "yarns.multifilament.torsion_factor": 100.0})
+        p = homtex.seam_profile(c, seam_distance=24.0, prestrain=0.7, steps=8)
+    assert p.attrs["status"].startswith("failed") and "bobbin thread slipped through the bottom layer" in p.attrs["status"]
