@@ -139,6 +139,14 @@ def calibrate_layer_rigidity(cell, *, seam_distance: float = 24.0, cushion_heigh
     return float(np.exp(brentq(resid, lo, hi, xtol=1e-10)))
 
 
+def stitch_pull(hs: float, *, s: float, H: float, eps0: float, EA: float) -> float:
+    """Pull P (N) of a sliding lock-stitch thread on each layer, per stitch, at seam-line height
+    hs (mm): thread length 2 s + 2 hs, rest length (1 - eps0)(2 s + 2 H), tension-only, two legs
+    per layer (module docstring)."""
+    L_rest = (1.0 - eps0) * (2 * s + 2 * H)
+    return max(0.0, 2.0 * EA * ((2 * s + 2 * hs) / L_rest - 1.0))
+
+
 def _green(x: np.ndarray, d: float, beta: float, k: float) -> np.ndarray:
     """Periodic deflection per unit point force (mm/N) at x, forces at n d."""
     out = np.zeros_like(x, dtype=float)
@@ -206,7 +214,7 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
     L_rest = (1.0 - eps0) * (2 * s + 2 * H)
 
     def force(hs):
-        return max(0.0, 2.0 * EA * ((2 * s + 2 * hs) / L_rest - 1.0))
+        return stitch_pull(hs, s=s, H=H, eps0=eps0, EA=EA)
 
     def resid(hs):
         return (H - hs) - 2.0 * force(hs) * g0
@@ -424,6 +432,16 @@ class SeamSolver:
             self.retries += 1
             return run(None)
 
+    def held(self, res):
+        """``res`` if the stitch still holds the fabric between its threads, else SolverError
+        (:func:`thread_escape`): the caller treats the step as failed and cuts it."""
+        from .errors import SolverError
+
+        escape = thread_escape(self.frame, self.info, res.u)
+        if escape:
+            raise SolverError(escape)
+        return res
+
     def _accept(self, res, alpha):
         self.alpha = alpha
         self.u_ref = res.extra["u_ext"]
@@ -448,10 +466,7 @@ class SeamSolver:
                 raise SolverError(f"seam pre-strain ramp: time limit {time_limit:g} s reached at {self.alpha:.4g} x eps0")
             a = min(1.0, self.alpha + da)
             try:
-                res = self._solve(a)
-                escape = thread_escape(self.frame, self.info, res.u)
-                if escape:
-                    raise SolverError(escape)
+                res = self.held(self._solve(a))
             except (SolverError, np.linalg.LinAlgError) as err:
                 if cuts >= max_cuts:
                     raise SolverError(f"seam pre-strain ramp failed at {a:.4g} x eps0 after {cuts} step cuts: "
@@ -694,11 +709,7 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
         slack = _SlackThreads(frame, info, ss.cs)
 
         def solve_step():
-            res = slack.solve(ss) if tension_only else ss._solve(1.0)
-            escape = thread_escape(frame, info, res.u)
-            if escape:
-                raise SolverError(escape)
-            return res
+            return ss.held(slack.solve(ss) if tension_only else ss._solve(1.0))
 
         H0, d_top0 = touch(u)
         # settle with both plates just touching: freeing the interlock lets a stitch loop that the

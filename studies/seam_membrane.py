@@ -43,7 +43,7 @@ import xarray as xr
 from scipy.optimize import brentq
 
 import homtex
-from homtex.seams import fabric_modulus, layer_rigidity
+from homtex.seams import fabric_modulus, layer_rigidity, stitch_pull
 
 HERE = Path(__file__).resolve().parent
 TARGET = {18.0: 10.23, 24.0: 14.33, 43.0: 20.3}      # the paper's simulated cushion heights, mm
@@ -81,10 +81,8 @@ class Membrane:
 
     def solve(self, d, eps0, points=121):
         H, s, EA = self.H, self.s, self.EA
-        L_rest = (1.0 - eps0) * (2 * s + 2 * H)
-
         def force(hs):
-            return max(0.0, 2.0 * EA * ((2 * s + 2 * hs) / L_rest - 1.0))
+            return stitch_pull(hs, s=s, H=H, eps0=eps0, EA=EA)
 
         def resid(hs):
             return (H - hs) - 2.0 * self.deflection(force(hs), d, np.zeros(1))[0][0]
