@@ -9,18 +9,18 @@ spacer-fabric geometry, macro layer, studies) are imported on first use.
 from importlib import import_module
 
 from .errors import InputError, SolverError
-from .frame import Frame
-from .sections import YarnType
-from .solvers import LinearSolver, SolveReport
-from .static import StaticResult, solve_static
+from .model.frame import Frame
+from .model.sections import YarnType
+from .linalg.solvers import LinearSolver, SolveReport
+from .analysis.static import StaticResult, solve_static
 
 __version__ = "0.1.0"
 
 # name -> module that defines it (imported lazily so `import homtex` stays light)
 _LAZY = {
-    "homogenize": ".periodic",
-    "Homogenization": ".periodic",
-    "periodize": ".periodic",
+    "homogenize": ".analysis.periodic",
+    "Homogenization": ".analysis.periodic",
+    "periodize": ".analysis.periodic",
     "load_cell": ".cells",
     "Cell": ".cells",
     "Contact": ".contact",
@@ -30,9 +30,9 @@ _LAZY = {
     "Plate": ".contact",
     "macro_curve": ".macro",
     "run_study": ".study",
-    "Lookup": ".rom",
-    "solve_nonlinear": ".nonlinear",
-    "Corotational": ".nonlinear",
+    "Lookup": ".lookup",
+    "solve_nonlinear": ".analysis.nonlinear",
+    "Corotational": ".analysis.nonlinear",
 }
 
 __all__ = ["Frame", "InputError", "LinearSolver", "SolveReport", "SolverError", "StaticResult",

@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .frame import Frame
-from .sections import YarnType
+from .model.frame import Frame
+from .model.sections import YarnType
 
 try:
     import tomllib

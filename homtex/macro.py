@@ -79,7 +79,7 @@ def unseamed_law(curve):
     Dataset: ``stress`` (kPa) over ``strain`` (the point (0, 0) is prepended if missing);
     callable: vectorised stress_kPa(strain), eps_max = inf.
     """
-    from .rom import Lookup
+    from .lookup import Lookup
 
     if callable(curve) and not isinstance(curve, Lookup):
         return (lambda e: np.asarray(curve(np.asarray(e, dtype=float)), dtype=float)), math.inf

@@ -20,7 +20,7 @@ import numpy as np
 import xarray as xr
 
 import homtex
-from homtex.io import read_netcdf, write_netcdf
+from homtex.output.io import read_netcdf, write_netcdf
 from homtex.macro import macro_curve
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from homtex.io import write_netcdf
-from homtex.rom import Lookup
+from homtex.output.io import write_netcdf
+from homtex.lookup import Lookup
 
 
 def f(x, y):

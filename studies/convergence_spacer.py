@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
 import homtex  # noqa: E402
-from homtex.io import write_netcdf  # noqa: E402
+from homtex.output.io import write_netcdf  # noqa: E402
 
 warnings.simplefilter("ignore")   # creation overlaps are reported by the cell; not the point here
 

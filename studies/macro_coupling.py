@@ -28,7 +28,7 @@ import scipy.sparse as sp  # noqa: E402
 import xarray as xr  # noqa: E402
 from scipy.optimize import lsq_linear  # noqa: E402
 
-from homtex.io import write_netcdf  # noqa: E402
+from homtex.output.io import write_netcdf  # noqa: E402
 
 
 def beam_on_columns(h, d, H0, k, D, w_all, n=127):

@@ -28,7 +28,7 @@ import xarray as xr  # noqa: E402
 import homtex  # noqa: E402
 from homtex.errors import SolverError  # noqa: E402
 from homtex.geometry.seam import seam_cell  # noqa: E402
-from homtex.io import write_netcdf  # noqa: E402
+from homtex.output.io import write_netcdf  # noqa: E402
 from homtex.seams import SeamSolver, measure_profile  # noqa: E402
 
 warnings.simplefilter("ignore")   # creation overlaps are reported by the cell

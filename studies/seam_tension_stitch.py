@@ -16,7 +16,7 @@ import numpy as np
 import homtex
 from homtex.geometry.seam import seam_cell
 from homtex.seams import SeamSolver, measure_profile
-from homtex.static import prestrain_load
+from homtex.analysis.static import prestrain_load
 
 cell = homtex.load_cell(Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml")
 eps0 = 0.3

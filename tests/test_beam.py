@@ -6,7 +6,7 @@ import pytest
 import homtex
 from homtex.fem.assembly import Assembler, assemble_reference
 from homtex.fem.beam import local_stiffness
-from homtex.sections import section_properties
+from homtex.model.sections import section_properties
 
 from conftest import line_frame, random_frame
 
@@ -128,7 +128,7 @@ def test_rigid_body_motion_gives_zero_forces(rng):
     K = Assembler(f).stiffness()
     Ku = K @ u.ravel()
     assert np.abs(Ku).max() < 1e-10 * np.abs(K.data).max() * np.abs(u).max()
-    from homtex.static import element_state
+    from homtex.analysis.static import element_state
     forces, energy = element_state(f, u)
     assert np.abs(forces).max() < 1e-9 * np.abs(K.data).max() * np.abs(u).max()
     assert np.abs(energy).max() < 1e-18 * np.abs(K.data).max()

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from homtex.cli import main
+from homtex.app.cli import main
 
 
 def test_run_quick_writes_the_paper_study(tmp_path):
@@ -53,7 +53,7 @@ def test_run_quick_writes_the_paper_study(tmp_path):
 
 
 def test_bad_input_is_a_message_not_a_traceback(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "homtex.cli", "seam", str(tmp_path / "missing.toml"),
+    p = subprocess.run([sys.executable, "-m", "homtex.app.cli", "seam", str(tmp_path / "missing.toml"),
                         "--distance", "24"], capture_output=True, text=True)
     assert p.returncode == 2
     assert "Traceback" not in p.stderr and "error" in p.stderr
@@ -76,7 +76,7 @@ def test_malformed_cell_file_names_key(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[cell]\nname = "x"\ngenerator = "square"\n[parameters]\na = -1.0\n'
                    '[yarns.s]\nsection = "circle"\nradius = 0.1\nE = 1.0\nnu = 0.3\nsource = "t"\n')
-    p = subprocess.run([sys.executable, "-m", "homtex.cli", "homogenize", str(bad)],
+    p = subprocess.run([sys.executable, "-m", "homtex.app.cli", "homogenize", str(bad)],
                        capture_output=True, text=True)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert "bad.toml" in p.stderr and "[parameters]" in p.stderr and "'a'" in p.stderr

@@ -7,9 +7,9 @@ import scipy.sparse as sp
 import homtex
 from homtex import SolverError
 from homtex.geometry.lattices import lattice_frame
-from homtex.krylov import BatchedVCycle, BlockOperator, block_pcg, bsr_gemm, solve_many
-from homtex.periodic import _Operator, unit_strains
-from homtex.solvers import LinearSolver, ScaledAMG, rigid_body_modes
+from homtex.linalg.krylov import BatchedVCycle, BlockOperator, block_pcg, bsr_gemm, solve_many
+from homtex.analysis.periodic import _Operator, unit_strains
+from homtex.linalg.solvers import LinearSolver, ScaledAMG, rigid_body_modes
 
 
 def _random_bsr(nbr, nbc, R, C, seed=0, per_row=3):

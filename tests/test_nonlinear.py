@@ -8,7 +8,7 @@ from scipy.special import ellipe, ellipk
 import homtex
 from homtex.errors import InputError, SolverError
 from homtex.fem.corotational import expmap, logmap
-from homtex.nonlinear import Corotational
+from homtex.analysis.nonlinear import Corotational
 from homtex import solve_nonlinear
 
 from conftest import line_frame

@@ -8,7 +8,7 @@ from homtex import Frame, InputError, SolverError
 from homtex.fem.assembly import assemble_reference
 from homtex.fem.beam import local_stiffness
 from homtex.geometry.lattices import lattice_frame
-from homtex.periodic import (compression_modulus, jump_load, periodize, rotate_stiffness,
+from homtex.analysis.periodic import (compression_modulus, jump_load, periodize, rotate_stiffness,
                              solve_macro)
 
 E_WALL, NU_WALL = 3000.0, 0.3

@@ -5,7 +5,7 @@ import pytest
 import xarray as xr
 
 from homtex.errors import InputError
-from homtex.rom import Lookup
+from homtex.lookup import Lookup
 
 
 def f(x, y):
@@ -119,7 +119,7 @@ def test_out_of_range_and_masked_grid_named():
 
 @pytest.mark.parametrize("kernel", ["thin_plate_spline", "cubic", "linear"])
 def test_rbf_kernels_compiled_match_numpy(kernel):
-    from homtex import rom
+    from homtex import lookup as rom
 
     p = np.random.default_rng(3).uniform(0, 1, (40, 3))
     y = np.column_stack([np.sin(p.sum(1)), p[:, 0] * p[:, 2]])

@@ -251,8 +251,8 @@ def test_foundation_no_prestrain_flat_and_symmetric(cell):
 
 
 def test_plots_and_vtk(cell, tmp_path):
-    from homtex.plot import plot_cell, plot_profile
-    from homtex import vtk
+    from homtex.output.plot import plot_cell, plot_profile
+    from homtex.output import vtk
     assert plot_cell(cell, tmp_path / "c.png").stat().st_size > 1000
     assert plot_profile(homtex.seam_profile(cell, seam_distance=24.0, method="foundation"),
                         tmp_path / "p.png").stat().st_size > 1000

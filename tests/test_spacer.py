@@ -8,7 +8,7 @@ import pytest
 import homtex
 from homtex.errors import InputError
 from homtex.geometry.spacer import parse_lapping, parse_threading, spacer_fabric
-from homtex.sections import YarnType
+from homtex.model.sections import YarnType
 
 CELL = "cells/spacer_20mm.toml"
 PENALTY = homtex.Contact(enforcement="penalty", penalty=5000.0)
@@ -148,7 +148,7 @@ def test_compression_monotone_and_linear_range(curve):
 
 
 def test_supercell_gives_same_stress(cell, curve):
-    from homtex.periodic import periodize  # noqa: F401  (ensure the module exists)
+    from homtex.analysis.periodic import periodize  # noqa: F401  (ensure the module exists)
     fr = cell.frame
     n = fr.n_nodes
     P = fr.periods

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from ..errors import InputError, SolverError
-from ..frame import Frame
+from ..model.frame import Frame
 from .constraints import Plate, node_contact_radius
 from .solve import Contact, ContactSolver
 
@@ -200,8 +200,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     cor = None
     plate_u = {"u": None}
     if geometry == "nonlinear":
-        from ..nonlinear import Corotational
-        from .nonlinear import newton_contact
+        from ..analysis.nonlinear import Corotational
+        from .newton import newton_contact
 
         cor = Corotational(frame, cs.assembler)
 
@@ -234,7 +234,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
 
     rec["substeps"] = []
     previous = 0.0
-    from ..progress import Progress
+    from ..output.progress import Progress
 
     bar = Progress(len(targets), "compression steps", enabled=progress)
     for step, target in enumerate(targets, start=1):

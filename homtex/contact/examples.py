@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..frame import Frame
+from ..model.frame import Frame
 
 
 def beam_grid(n: int = 3, n_el: int = 4, *, L: float = 40.0, r: float = 0.5, E: float = 1000.0,

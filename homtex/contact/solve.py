@@ -43,9 +43,9 @@ import scipy.sparse as sp
 
 from ..errors import InputError, SolverError
 from ..fem.assembly import Assembler
-from ..frame import Frame
-from ..solvers import LinearSolver, constrain, rigid_body_modes
-from ..supports import check_held, parse_fixed, parse_loads
+from ..model.frame import Frame
+from ..linalg.solvers import LinearSolver, constrain, rigid_body_modes
+from ..model.scene import check_held, parse_fixed, parse_loads
 from .broad import BroadPhase, exclusion_lists
 from .constraints import (ContactSet, Plate, build_rows, dedupe_pairs, node_contact_radius, pair_keys,
                           plate_keys, point_keys)
@@ -438,7 +438,7 @@ class ContactSolver:
         Returns a :class:`~homtex.static.StaticResult` with ``.contacts`` and ``extra``
         (iterations, linear solves, timings, plate forces and displacements, contact energy).
         """
-        from ..static import ENERGY_KEYS, StaticResult, element_state
+        from ..analysis.static import ENERGY_KEYS, StaticResult, element_state
 
         cont = self.contact
         frame = self.frame
@@ -758,7 +758,7 @@ def _new_stats():
 
 
 def _prestrain_load(frame):
-    from ..static import prestrain_load
+    from ..analysis.static import prestrain_load
 
     return prestrain_load(frame)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..frame import Frame
+from ..model.frame import Frame
 
 
 @dataclass

@@ -38,7 +38,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..frame import Frame
+from ..model.frame import Frame
 
 
 def seam_tiling(cell, seam_distance: float, stitch_length: float, *, stitches: int = 1,

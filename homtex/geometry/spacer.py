@@ -79,8 +79,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..frame import Frame
-from ..sections import YarnType
+from ..model.frame import Frame
+from ..model.sections import YarnType
 
 INCH = 25.4  # mm
 

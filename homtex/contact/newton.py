@@ -53,7 +53,7 @@ def newton_contact(cs, cor, *, prestrain_scale: float = 1.0, plate_u=None, warm_
     (result, plate_u, iterations): the last contact solve's StaticResult with ``u`` (n, 6)
     (translations, rotation vectors), ``forces`` and ``energy`` of the co-rotational state.
     """
-    from ..static import ENERGY_KEYS
+    from ..analysis.static import ENERGY_KEYS
 
     n, N, P = cs.n, cs.N, cs.P
     frame = cs.frame

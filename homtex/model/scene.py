@@ -12,7 +12,7 @@ from collections.abc import Mapping
 import numpy as np
 from numba import njit
 
-from .errors import InputError, SolverError
+from ..errors import InputError, SolverError
 
 DOF_NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
 MOTION_NAMES = ("translation x", "translation y", "translation z",

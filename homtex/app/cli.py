@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import InputError, SolverError
+from ..errors import InputError, SolverError
 
 
 def _out(args, default: str) -> Path:
@@ -93,7 +93,7 @@ def cmd_macro(args) -> None:
 
 
 def cmd_study(args) -> None:
-    from .study import run_study
+    from ..study import run_study
 
     ds = run_study(args.study, args.out, scheduler=args.scheduler)
     _say(str(ds))
@@ -108,7 +108,7 @@ def cmd_plot(args) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="homtex", description=__doc__.split("\n")[0])
-    from . import __version__
+    from .. import __version__
 
     p.add_argument("--version", action="version", version=f"homtex {__version__}")
     sub = p.add_subparsers(dest="command", required=True)

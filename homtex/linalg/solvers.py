@@ -23,7 +23,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit, prange
 
-from .errors import SolverError
+from ..errors import SolverError
 
 try:  # optional, fast sparse Cholesky
     from sksparse.cholmod import cholesky as _cholmod  # type: ignore
@@ -234,7 +234,7 @@ class LinearSolver:
     def __init__(self, A, *, method: str = "amg", B=None, tol: float = 1e-10,
                  maxiter: int | None = None, hierarchy=None):
         if method not in METHODS:
-            from .errors import InputError
+            from ..errors import InputError
             raise InputError(f"solver must be one of {METHODS}, got {method!r}")
         self.A = A
         self.method = method

@@ -59,9 +59,9 @@ from typing import Callable
 
 import numpy as np
 
-from .cells import TABLES, CellError, load_cell
-from .progress import Progress
-from .errors import InputError
+from ..cells import TABLES, CellError, load_cell
+from ..output.progress import Progress
+from ..errors import InputError
 
 try:
     import tomllib
@@ -140,7 +140,7 @@ def analytic_task(cell=None, *, x: float = 0.0, y: float = 0.0, z: float = 0.0, 
 @register_task("homogenize")
 def homogenize_task(cell, *, solver: str = "direct", tol: float = 1e-10, free=None):
     """Effective stiffness of a periodic cell (``homtex.homogenize``); timings dropped."""
-    from .periodic import homogenize
+    from ..analysis.periodic import homogenize
 
     ds = homogenize(cell.frame, solver=solver, tol=tol, free=free).to_dataset()
     return ds.drop_vars([v for v in ds.data_vars if "seconds" in str(v)])
@@ -165,7 +165,7 @@ def index_dim(ds, dim: str, new: str, long_name: str):
 @register_task("compress")
 def compress_task(cell, **options):
     """Compression curve (``homtex.compress``) over ``step`` (strain is a variable)."""
-    from .contact import compress
+    from ..contact import compress
 
     return index_dim(compress(cell, **options), "strain", "step", "load step (1-based order of the curve)")
 
@@ -173,7 +173,7 @@ def compress_task(cell, **options):
 @register_task("seam")
 def seam_task(cell, **options):
     """Seam cushion profile (``homtex.seam_profile``) over ``profile_point`` (x is a variable)."""
-    from .seams import seam_profile
+    from ..seams import seam_profile
 
     return index_dim(seam_profile(cell, **options), "x", "profile_point", "sample across one seam distance")
 
@@ -185,8 +185,8 @@ def macro_task(cell, **options):
     ``curve_file``: a netCDF compression curve (``stress`` kPa over ``strain``, as written by
     ``homtex compress``) or a saved strain Lookup, used instead of running ``compress``.
     """
-    from .io import read_netcdf
-    from .macro import macro_curve
+    from ..output.io import read_netcdf
+    from ..macro import macro_curve
 
     if "curve_file" in options:  # a saved compression curve (netCDF: stress over strain) or Lookup
         path = options.pop("curve_file")
@@ -194,7 +194,7 @@ def macro_task(cell, **options):
             raise InputError("macro task: give 'curve_file' or 'curve', not both")
         data = read_netcdf(path)
         if "lookup_kind" in data.attrs:
-            from .rom import Lookup
+            from ..lookup import Lookup
 
             options["curve"] = Lookup.load(path)
         else:
@@ -409,8 +409,8 @@ def _run_point(job: dict) -> dict:
     """Run one study point and write its file atomically; returns {index, status, error, seconds}."""
     import xarray as xr
 
-    from . import __version__
-    from .io import write_netcdf
+    from .. import __version__
+    from ..output.io import write_netcdf
 
     if job.get("threads"):  # one point per process: no nested BLAS/numba thread pools
         _limit_threads(int(job["threads"]))
@@ -439,7 +439,7 @@ def _run_point(job: dict) -> dict:
 
 def _read_point(path: Path, key: str):
     """The point Dataset if its file exists and belongs to this study point, else None."""
-    from .io import read_netcdf
+    from ..output.io import read_netcdf
 
     if not path.exists():
         return None
@@ -564,7 +564,7 @@ def combine_points(study: Study, points: list):
     """
     import xarray as xr
 
-    from . import __version__
+    from .. import __version__
 
     status = np.array([STATUS_PENDING if p is None else int(p["status"]) for p in points], dtype=np.int8)
     errors = np.array(["not run" if p is None else str(p["error"].values) for p in points], dtype=object)
@@ -651,7 +651,7 @@ def run_study(path, out_dir, *, scheduler=None, workers: int | None = None, prog
     xarray.Dataset: the task's variables over the grid parameters (dimensions) or over
     ``sample``; ``status`` and ``error`` per point; cell definition, study and version in attrs.
     """
-    from .io import write_netcdf
+    from ..output.io import write_netcdf
 
     study = load_study(path)
     out = Path(out_dir)

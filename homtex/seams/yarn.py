@@ -60,7 +60,7 @@ import math
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 GEOMETRIES = ("linear", "nonlinear")
 
@@ -87,7 +87,7 @@ def fabric_modulus(cell, *, strain: float = 0.05, steps: int = 2) -> float:
     key = ("fabric_modulus", float(strain))
     if key in info:
         return info[key]
-    from .contact import Contact, compress
+    from ..contact import Contact, compress
     ds = compress(cell, strain=strain, steps=steps, contact=Contact(enforcement="penalty", penalty=5000.0))
     if ds.attrs["status"] != "ok":
         raise InputError(f"fabric_modulus: compression of cell {cell.name!r} failed: {ds.attrs['status']}")
@@ -279,7 +279,7 @@ def compression_summary(curve, *, validity: float = 0.30) -> dict:
 # ======================================================================================
 #: contact options of the seam solves: pdas + augmented Lagrangian (exact gaps)
 def _default_contact():
-    from .contact import Contact
+    from ..contact import Contact
 
     return Contact()
 
@@ -372,9 +372,9 @@ class SeamSolver:
 
     def __init__(self, frame, info, *, contact=None, plates=(), solver: str = "direct", geometry: str = "linear",
                  stabilize: float = 0.0):
-        from .contact.compress import _default_fixed
-        from .contact.solve import ContactSolver
-        from .static import prestrain_load
+        from ..contact.compress import _default_fixed
+        from ..contact.solve import ContactSolver
+        from ..analysis.static import prestrain_load
 
         self.frame, self.info = frame, info
         nf = int(info["fabric_nodes"])
@@ -396,7 +396,7 @@ class SeamSolver:
         self.cor = None
         self.plate_u = None
         if geometry == "nonlinear":
-            from .nonlinear import Corotational
+            from ..analysis.nonlinear import Corotational
 
             self.cor = Corotational(frame, self.cs.assembler)
         self.alpha = 0.0
@@ -409,11 +409,11 @@ class SeamSolver:
     def _solve(self, alpha):
         """Contact solve at pre-strain factor alpha; a cycling active set is retried once from a
         cold start (active set from the gaps instead of the previous step's contacts)."""
-        from .errors import SolverError
+        from ..errors import SolverError
 
         n = self.frame.n_nodes
         if self.cor is not None:
-            from .contact.nonlinear import newton_contact
+            from ..contact.newton import newton_contact
 
             def run(warm):
                 res, pu, _ = newton_contact(self.cs, self.cor, prestrain_scale=alpha, plate_u=self.plate_u,
@@ -435,7 +435,7 @@ class SeamSolver:
     def held(self, res):
         """``res`` if the stitch still holds the fabric between its threads, else SolverError
         (:func:`thread_escape`): the caller treats the step as failed and cuts it."""
-        from .errors import SolverError
+        from ..errors import SolverError
 
         escape = thread_escape(self.frame, self.info, res.u)
         if escape:
@@ -456,7 +456,7 @@ class SeamSolver:
         Returns the list of (alpha, contact iterations, active contacts) of the accepted steps."""
         import time
 
-        from .errors import SolverError
+        from ..errors import SolverError
 
         da = da0 = (1.0 - self.alpha) / int(steps)
         cuts = 0
@@ -513,7 +513,7 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
 
     import xarray as xr
 
-    from .geometry.seam import seam_cell
+    from ..geometry.seam import seam_cell
 
     seam = _cell_seam_table(cell)
     eps0 = float(seam.get("prestrain", 0.0)) if prestrain is None else float(prestrain)
@@ -532,7 +532,7 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
     hist = []
     iters = 0
     if eps0 > 0.0:
-        from .errors import SolverError
+        from ..errors import SolverError
 
         try:
             ss = SeamSolver(frame, info, contact=contact, geometry=geometry, stabilize=stabilize)
@@ -644,10 +644,10 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
 
     import xarray as xr
 
-    from .contact import compress
-    from .contact.constraints import Plate, node_contact_radius
-    from .errors import SolverError
-    from .geometry.seam import seam_cell
+    from ..contact import compress
+    from ..contact.constraints import Plate, node_contact_radius
+    from ..errors import SolverError
+    from ..geometry.seam import seam_cell
 
     if not (0.0 < float(strain) < 1.0):
         raise InputError(f"strain must lie in (0, 1), got {strain!r}")
@@ -701,7 +701,7 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
 
         # the plates now hold the vertical position: free the interlock's uz (its reaction was zero,
         # the sewn state is self-equilibrated) so that plate loads on the stitch reach the fabric
-        from .contact.solve import ContactSolver
+        from ..contact.solve import ContactSolver
 
         fix = dict(ss.fixed)
         fix[int(info["interlock_nodes"][0])] = [0, 1]
@@ -776,7 +776,7 @@ def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, 
                     requested_seam_distance_mm=float(info["requested_seam_distance"]), prestrain=eps0,
                     cushion_height_mm=float(np.nanmax(h_sewn)), seam_height_mm=float(h_sewn[nb // 2]),
                     seconds=time.perf_counter() - t0, n_nodes=int(frame.n_nodes), tension_only=int(tension_only))
-    from .contact.compress import flag_force_drops
+    from ..contact.compress import flag_force_drops
 
     return flag_force_drops(ds, what=f"seam_compression d = {float(info['seam_distance']):.4g} mm, eps0 = {eps0:g}")
 
@@ -796,7 +796,7 @@ class _SlackThreads:
         self.full = cs.assembler.element_arrays()
 
     def _apply(self, ss):
-        from .static import prestrain_load
+        from ..analysis.static import prestrain_load
 
         scale = np.where(self.slack, self.factor, 1.0)
         R, L, EA, GJ, EIy, EIz, kGA = self.full
@@ -805,8 +805,8 @@ class _SlackThreads:
         ss.f_pre = prestrain_load(self.frame, EA * scale)
 
     def solve(self, ss, max_rounds: int = 12):
-        from .errors import SolverError
-        from .static import element_state
+        from ..errors import SolverError
+        from ..analysis.static import element_state
 
         seen = {self.slack.tobytes()}
         for _ in range(max_rounds):

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from . import __version__
-from .errors import InputError
+from .. import __version__
+from ..errors import InputError
 
 
 def _attrs(ds: xr.Dataset, **extra) -> xr.Dataset:
@@ -23,7 +23,7 @@ def _attrs(ds: xr.Dataset, **extra) -> xr.Dataset:
 
 def _save(ds: xr.Dataset, path: Path) -> Path:
     try:
-        from .io import write_netcdf
+        from ..output.io import write_netcdf
     except ImportError:  # io.py lands with the studies issue
         ds.to_netcdf(path, engine="netcdf4")
     else:
@@ -47,8 +47,8 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
     Solved with every solver; writes the per-node displacement, per-element axial force and
     energy, and the solver reports. Returns {name: path}.
     """
-    from .geometry.lattices import lattice_frame
-    from .static import solve_static
+    from ..geometry.lattices import lattice_frame
+    from ..analysis.static import solve_static
 
     f = lattice_frame("octet", radius=radius, E=2000.0, nu=0.35, repeat=repeat, periodic=False,
                       elements_per_strut=elements_per_strut)
@@ -128,8 +128,8 @@ def _timed(fn, *args, **kw):
 def unseamed_stage(cell, out: Path, *, strain=0.5, steps=25, progress=False) -> tuple:
     """Yarn-level compression of the unseamed cell between plates: curve, modulus, DIN-style
     stresses, energy by yarn system. Returns (curve Dataset, summary dict, {name: path})."""
-    from .contact import compress
-    from .seams import compression_summary
+    from ..contact import compress
+    from ..seams import compression_summary
 
     curve, sec = _timed(compress, cell, strain=strain, steps=steps, progress=progress)
     if curve.sizes["strain"] == 0:
@@ -173,7 +173,7 @@ def cushion_stage(cell, out: Path, *, distances=(18.0, 24.0, 43.0), low_prestrai
 
     Returns ({method: {(d, eps0 or None): profile}}, table rows, {name: path}).
     """
-    from .seams import seam_profile
+    from ..seams import seam_profile
 
     methods = ("yarn", "foundation")
     profiles = {m: {} for m in methods}
@@ -253,7 +253,7 @@ def macro_stage(cell, curve, profiles, out: Path, *, distances=(18.0, 24.0, 43.0
                 strain=0.5, seed=0) -> tuple:
     """Macro cushion-layer curves under the 121 cm^2 plate: no seams and each seam distance.
     Returns (Dataset, {name: path})."""
-    from .macro import macro_curve
+    from ..macro import macro_curve
 
     cases = [None, *distances]
     curves, secs = [], []
@@ -307,8 +307,8 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
     """Yarn-level compression of the seam cell (paper's Fig. 11) against the macro layer on
     the same specimen (identical cushions, no scatter): force error up to ``strain`` and the
     run-time ratio, measured in this run. Returns (Dataset, summary dict, {name: path})."""
-    from .macro import macro_curve
-    from .seams import seam_compression
+    from ..macro import macro_curve
+    from ..seams import seam_compression
 
     H0 = float(cell.info["thickness"])
     d = float(seam_distance)
@@ -406,9 +406,9 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
     Errors of 0 (the references) are drawn at 1e-6.
     Returns (Dataset, {name: path}).
     """
-    from .contact import Contact, compress
-    from .macro import macro_curve
-    from .seams import seam_compression
+    from ..contact import Contact, compress
+    from ..macro import macro_curve
+    from ..seams import seam_compression
 
     rows = []   # (question, label, seconds, error)
     # A: unseamed
@@ -424,7 +424,7 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
         ds, sec = _timed(compress, cell, strain=0.2, steps=4, contact=Contact(gap_tol=gtol))
         rows.append(("A unseamed to 20 %", f"yarn, gap tol {gtol:g} mm", sec,
                      _curve_error(rx, ry, ds.strain.values, ds.stress.values, 0.2)))
-    from .rom import Lookup
+    from ..lookup import Lookup
 
     lk, sec_fit = _timed(Lookup.from_dataset, curve, "stress")
     e = rx[rx > 0]
@@ -486,8 +486,8 @@ def main_job(out: Path, *, quick: bool = False) -> dict:
     curves -> yarn-level seamed compression against the macro layer -> speed-accuracy chart;
     summary.md collects the tables.
     """
-    from .cells import load_cell
-    from .plot import plot_cell
+    from ..cells import load_cell
+    from ..output.plot import plot_cell
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -566,14 +566,14 @@ def main_job(out: Path, *, quick: bool = False) -> dict:
 
 
 def _load(path):
-    from .cells import load_cell
+    from ..cells import load_cell
 
     return load_cell(path)
 
 
 def cell_summary(path, out: Path) -> dict:
     """Picture (yarn systems coloured), VTK (if meshio is installed) and a text summary."""
-    from .plot import plot_cell
+    from ..output.plot import plot_cell
 
     cell = _load(path)
     out = Path(out)
@@ -589,7 +589,7 @@ def cell_summary(path, out: Path) -> dict:
     print("\n".join(lines))
     paths = {"picture": plot_cell(cell, out / f"{cell.name}.png")}
     try:
-        from .vtk import write_vtk
+        from ..output.vtk import write_vtk
 
         paths["VTK"] = write_vtk(f, out / f"{cell.name}.vtu")
     except InputError as exc:   # meshio missing
@@ -605,8 +605,8 @@ def homogenize_cell(path, out: Path, *, solver="amg"):
 
     Returns (Dataset, [paths]).
     """
-    from .cells import load_cell
-    from .periodic import homogenize
+    from ..cells import load_cell
+    from ..analysis.periodic import homogenize
 
     cell = load_cell(path)
     res = homogenize(cell.frame, solver=solver)
@@ -643,8 +643,8 @@ def compress_cell(path, out: Path, *, strain=0.3, steps=20):
 
 
 def seam_cell(path, out: Path, *, seam_distance, prestrain=None, method="yarn"):
-    from .plot import plot_profile
-    from .seams import seam_profile
+    from ..output.plot import plot_profile
+    from ..seams import seam_profile
 
     cell = _load(path)
     prof = seam_profile(cell, seam_distance=seam_distance, prestrain=prestrain, method=method)
@@ -657,7 +657,7 @@ def seam_cell(path, out: Path, *, seam_distance, prestrain=None, method="yarn"):
 
 def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0, pre_stress="thread",
                slack_travel=None, seam_method="yarn"):
-    from .macro import macro_curve
+    from ..macro import macro_curve
 
     cell = _load(path)
     ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,

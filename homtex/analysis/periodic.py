@@ -43,12 +43,12 @@ import numpy as np
 import scipy.sparse as sp
 from numba import get_num_threads, njit, prange
 
-from .errors import InputError, SolverError
-from .fem.assembly import Assembler
-from .fem.beam import coefficients, element_response
-from .frame import Frame
-from .solvers import METHODS, LinearSolver, SolveReport, constrain, rigid_body_modes
-from .supports import check_held, components
+from ..errors import InputError, SolverError
+from ..fem.assembly import Assembler
+from ..fem.beam import coefficients, element_response
+from ..model.frame import Frame
+from ..linalg.solvers import METHODS, LinearSolver, SolveReport, constrain, rigid_body_modes
+from ..model.scene import check_held, components
 
 __all__ = ["homogenize", "Homogenization", "solve_macro", "MacroState", "periodize",
            "compression_modulus", "CompressionResult", "rotate_stiffness", "voigt_components",
@@ -471,7 +471,7 @@ def homogenize(frame: Frame, *, solver: str = "amg", tol: float = 1e-10, free=No
     W = np.empty_like(b)
     reports = []
     if solver == "amg" and batched and len(H) > 1:
-        from .krylov import solve_many
+        from ..linalg.krylov import solve_many
 
         W, reports = solve_many(op.lin, b, names=[f"unit case {c}" for c in comps])
         W[:, op.mask] = 0.0

@@ -17,12 +17,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputError, SolverError
-from .fem.assembly import Assembler
-from .fem.corotational import add_geometric, corotational_response, gather_ends, log_nodes, rotate_nodes
-from .frame import Frame
-from .solvers import LinearSolver, constrain
-from .supports import check_held, parse_fixed, parse_loads
+from ..errors import InputError, SolverError
+from ..fem.assembly import Assembler
+from ..fem.corotational import add_geometric, corotational_response, gather_ends, log_nodes, rotate_nodes
+from ..model.frame import Frame
+from ..linalg.solvers import LinearSolver, constrain
+from ..model.scene import check_held, parse_fixed, parse_loads
 
 GEOMETRIC = ("tension", "full", "none")
 

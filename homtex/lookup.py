@@ -394,14 +394,14 @@ class Lookup:
 
     def save(self, path) -> Path:
         """Write the lookup to a netCDF file (atomic)."""
-        from .io import write_netcdf
+        from .output.io import write_netcdf
 
         return write_netcdf(self.to_dataset(), path)
 
     @classmethod
     def load(cls, path) -> "Lookup":
         """Read a lookup written by :meth:`save` (refits the interpolator; the hold-out is read back)."""
-        from .io import read_netcdf
+        from .output.io import read_netcdf
 
         ds = read_netcdf(path)
         a = ds.attrs

@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-from .errors import SolverError
+from ..errors import SolverError
 from .solvers import SolveReport, _blas_single, convergence_error
 
 _CHUNK = 256  # block rows per parallel task

@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputError, SolverError
-from .fem.assembly import Assembler
-from .fem.beam import element_response, prestrain_forces
-from .frame import Frame
-from .solvers import LinearSolver, SolveReport, constrain, rigid_body_modes
-from .supports import check_held, parse_fixed, parse_loads
+from ..errors import InputError, SolverError
+from ..fem.assembly import Assembler
+from ..fem.beam import element_response, prestrain_forces
+from ..model.frame import Frame
+from ..linalg.solvers import LinearSolver, SolveReport, constrain, rigid_body_modes
+from ..model.scene import check_held, parse_fixed, parse_loads
 
 ENERGY_KEYS = ("axial", "torsion", "bending_y", "bending_z", "shear")
 
@@ -98,7 +98,7 @@ def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str = "amg", t
     if not isinstance(frame, Frame):
         raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
     if contact is not None:
-        from .contact.solve import solve_contact
+        from ..contact.solve import solve_contact
 
         return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
                              maxiter=maxiter, assembler=assembler, **contact_options)
