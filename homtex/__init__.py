@@ -2,32 +2,35 @@
 
 Units: mm, N, MPa inside the solver. Node DOFs: ux, uy, uz, rx, ry, rz.
 
-The public API is re-exported here; heavier parts (periodic homogenisation, contact,
-spacer-fabric geometry, macro layer, studies) are imported on first use.
+The public API is re-exported here; the stages behind it (periodic homogenisation, contact,
+spacer-fabric geometry, seams, macro layer, studies) are imported on first use, so
+``import homtex`` stays light.
 """
 
 from importlib import import_module
 
-from .errors import InputError, SolverError
+from ._version import __version__
+from .config import get_options, set_options
+from .errors import CellError, InputError, SolverError, StudyError
 from .model.frame import Frame
+from .model.results import StaticResult, Status
 from .model.sections import YarnType
-from .linalg.solvers import LinearSolver, SolveReport
-from .analysis.static import StaticResult, solve_static
 
-__version__ = "0.1.0"
-
-# name -> module that defines it (imported lazily so `import homtex` stays light)
+# name -> module that defines it (imported on first use)
 _LAZY = {
-    "homogenize": ".analysis.periodic",
-    "Homogenization": ".analysis.periodic",
-    "periodize": ".analysis.periodic",
+    "solve_static": ".api",
+    "compress": ".api",
+    "LinearSolver": ".linalg.solvers",
+    "SolveReport": ".linalg.solvers",
+    "homogenize": ".analysis.homogenize",
+    "Homogenization": ".analysis.homogenize",
+    "periodize": ".geometry.tiling",
     "load_cell": ".cells",
     "Cell": ".cells",
-    "Contact": ".contact",
-    "compress": ".contact",
+    "Contact": ".contact.options",
+    "Plate": ".model.scene",
     "seam_profile": ".seams",
     "seam_compression": ".seams",
-    "Plate": ".contact",
     "macro_curve": ".macro",
     "run_study": ".study",
     "Lookup": ".lookup",
@@ -35,8 +38,8 @@ _LAZY = {
     "Corotational": ".analysis.nonlinear",
 }
 
-__all__ = ["Frame", "InputError", "LinearSolver", "SolveReport", "SolverError", "StaticResult",
-           "YarnType", "solve_static", "__version__", *_LAZY]
+__all__ = ["CellError", "Frame", "InputError", "SolverError", "StaticResult", "Status", "StudyError", "YarnType",
+           "__version__", "get_options", "set_options", *_LAZY]
 
 
 def __getattr__(name: str):

@@ -32,23 +32,22 @@ from __future__ import annotations
 
 import copy
 import json
-import math
 from importlib import import_module
 from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import CellError, InputError
 from .model.frame import Frame
 from .model.sections import YarnType
+from .validate import check_keys, get_list, get_number, get_str, get_table, type_name
 
 try:
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - python 3.10
     import tomli as tomllib  # type: ignore
 
-__all__ = ["GENERATORS", "Cell", "CellError", "load_cell", "get_number", "get_int", "get_str",
-           "get_list", "check_keys"]
+__all__ = ["GENERATORS", "Cell", "CellError", "find_cell", "load_cell"]
 
 #: generator name -> "module:function" (imported lazily)
 GENERATORS: dict[str, str] = {
@@ -68,156 +67,10 @@ YARN_KEYS = ("section", "radius", "semi_axes", "E", "nu", "contact_radius", "sou
              "torsion_factor")
 
 
-class CellError(InputError):
-    """A bad cell file or cell parameter, naming the file, table and key.
-
-    ``str(err)`` reads ``cells/x.toml: [yarns.pile] key 'radius': must be > 0, got -0.1``.
-    """
-
-    def __init__(self, message: str, *, file=None, table: str | None = None, key: str | None = None):
-        super().__init__(message)
-        self.message = message
-        self.file = None if file is None else str(file)
-        self.table = table
-        self.key = key
-
-    def __str__(self) -> str:
-        parts = []
-        if self.file:
-            parts.append(f"{self.file}:")
-        if self.table:
-            parts.append(f"[{self.table}]")
-        if self.key:
-            parts.append(f"key '{self.key}':")
-        elif self.table:
-            parts[-1] += ":"
-        parts.append(self.message)
-        return " ".join(parts)
-
-
-# ----------------------------------------------------------------------------------
-# validation helpers (also for generators written elsewhere)
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _tname(v) -> str:
-    return {str: "a string", bool: "a boolean", int: "an integer", float: "a number",
-            list: "an array", dict: "a table"}.get(type(v), type(v).__name__)
-
-
-def get_number(d: dict, key: str, table: str, *, default=None, gt=None, ge=None, lt=None,
-               le=None, required: bool = True) -> float | None:
-    """A finite number d[key] with optional bounds, else CellError(table, key)."""
-    if key not in d:
-        if default is not None or not required:
-            return default
-        raise CellError("missing key (a number)", table=table, key=key)
-    v = d[key]
-    if not _is_number(v):
-        raise CellError(f"must be a number, got {_tname(v)} {v!r}", table=table, key=key)
-    v = float(v)
-    if not math.isfinite(v):
-        raise CellError(f"must be finite, got {v}", table=table, key=key)
-    for bound, op, ok in ((gt, ">", lambda x, b: x > b), (ge, ">=", lambda x, b: x >= b),
-                          (lt, "<", lambda x, b: x < b), (le, "<=", lambda x, b: x <= b)):
-        if bound is not None and not ok(v, bound):
-            raise CellError(f"must be {op} {bound}, got {v:g}", table=table, key=key)
-    return v
-
-
-def get_int(d: dict, key: str, table: str, *, default=None, ge=None) -> int | None:
-    """An integer d[key] (>= ge), else CellError(table, key)."""
-    if key not in d:
-        if default is not None:
-            return default
-        raise CellError("missing key (an integer)", table=table, key=key)
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise CellError(f"must be an integer, got {_tname(v)} {v!r}", table=table, key=key)
-    if ge is not None and v < ge:
-        raise CellError(f"must be >= {ge}, got {v}", table=table, key=key)
-    return int(v)
-
-
-def get_str(d: dict, key: str, table: str, *, default=None, choices=None) -> str | None:
-    """A non-empty string d[key] (one of ``choices``), else CellError(table, key)."""
-    if key not in d:
-        if default is not None:
-            return default
-        raise CellError("missing key (a string)", table=table, key=key)
-    v = d[key]
-    if not isinstance(v, str):
-        raise CellError(f"must be a string, got {_tname(v)} {v!r}", table=table, key=key)
-    if choices is not None and v not in choices:
-        raise CellError(f"must be one of {list(choices)}, got {v!r}", table=table, key=key)
-    if choices is None and not v.strip() and default is None:
-        raise CellError("must not be empty", table=table, key=key)
-    return v
-
-
-def get_list(d: dict, key: str, table: str, *, shape=None, integer: bool = False, default=None,
-             gt=None) -> np.ndarray | None:
-    """A numeric array d[key] of the given shape (None entries: any size)."""
-    if key not in d:
-        if default is not None:
-            return np.asarray(default)
-        raise CellError("missing key (an array)", table=table, key=key)
-    v = d[key]
-    if not isinstance(v, list):
-        raise CellError(f"must be an array, got {_tname(v)} {v!r}", table=table, key=key)
-    flat = list(_flatten(v))
-    kind = "integers" if integer else "numbers"
-    if not all((isinstance(x, int) and not isinstance(x, bool)) if integer else _is_number(x) for x in flat):
-        raise CellError(f"must be an array of {kind}, got {v!r}", table=table, key=key)
-    try:
-        arr = np.asarray(v, dtype=np.int64 if integer else float)
-    except ValueError:
-        raise CellError(f"must be a rectangular array of {kind}, got {v!r}", table=table, key=key) from None
-    if shape is not None:
-        ok = arr.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, arr.shape))
-        if not ok:
-            want = "x".join("n" if s is None else str(s) for s in shape)
-            raise CellError(f"must have shape {want}, got {list(arr.shape)}", table=table, key=key)
-    if not integer and not np.isfinite(arr).all():
-        raise CellError(f"must be finite, got {v!r}", table=table, key=key)
-    if gt is not None and arr.size and not (arr > gt).all():
-        raise CellError(f"entries must be > {gt}, got {v!r}", table=table, key=key)
-    return arr
-
-
-def _flatten(v):
-    for x in v:
-        if isinstance(x, list):
-            yield from _flatten(x)
-        else:
-            yield x
-
-
-def check_keys(d: dict, allowed, table: str) -> None:
-    """CellError for the first key of d not in ``allowed``."""
-    for key in d:
-        if key not in allowed:
-            raise CellError(f"unknown key; allowed keys are {sorted(allowed)}", table=table, key=key)
-
-
-def _table(d, key, table, required=True):
-    if key not in d:
-        if required:
-            raise CellError(f"missing table [{key}]" if not table else "missing table",
-                            table=table or None, key=key if table else None)
-        return {}
-    v = d[key]
-    if not isinstance(v, dict):
-        name = f"{table}.{key}" if table else key
-        raise CellError(f"must be a table, got {_tname(v)} {v!r}", table=name)
-    return v
-
-
 def _yarn(name: str, d: dict) -> YarnType:
     table = f"yarns.{name}"
     if not isinstance(d, dict):
-        raise CellError(f"must be a table, got {_tname(d)} {d!r}", table=table)
+        raise CellError(f"must be a table, got {type_name(d)} {d!r}", table=table)
     check_keys(d, YARN_KEYS, table)
     section = get_str(d, "section", table, choices=("circle", "ellipse"))
     if section == "circle":
@@ -281,17 +134,17 @@ class Cell:
                 if key not in TABLES:
                     raise CellError(f"unknown table [{key}]; a cell file has [cell], [parameters], "
                                     f"[yarns.<name>] and [resolution]", table=key)
-            cell = _table(data, "cell", "")
+            cell = get_table(data, "cell", "")
             check_keys(cell, CELL_KEYS, "cell")
             self.name = get_str(cell, "name", "cell")
             self.generator = get_str(cell, "generator", "cell")
             self.description = get_str(cell, "description", "cell", default="")
-            self.parameters = copy.deepcopy(_table(data, "parameters", "", required=False))
-            yarns = _table(data, "yarns", "")
+            self.parameters = copy.deepcopy(get_table(data, "parameters", "", required=False))
+            yarns = get_table(data, "yarns", "")
             if not yarns:
                 raise CellError("at least one [yarns.<name>] table is required", table="yarns")
             self.yarns = {name: _yarn(name, d) for name, d in yarns.items()}
-            self.resolution = copy.deepcopy(_table(data, "resolution", "", required=False))
+            self.resolution = copy.deepcopy(get_table(data, "resolution", "", required=False))
         except CellError as err:
             err.file = err.file or f
             raise

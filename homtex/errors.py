@@ -8,7 +8,7 @@ from __future__ import annotations
 
 
 class InputError(ValueError):
-    """Bad input: geometry, section, material, supports, loads or a cell file."""
+    """Bad input: geometry, section, material, supports, loads, options or a file."""
 
 
 class SolverError(RuntimeError):
@@ -23,3 +23,34 @@ class SolverError(RuntimeError):
         super().__init__(message)
         self.history = history
         self.report = report
+
+
+class CellError(InputError):
+    """A bad cell file or cell parameter, naming the file, table and key.
+
+    ``str(err)`` reads ``cells/x.toml: [yarns.pile] key 'radius': must be > 0, got -0.1``.
+    """
+
+    def __init__(self, message: str, *, file=None, table: str | None = None, key: str | None = None):
+        super().__init__(message)
+        self.message = message
+        self.file = None if file is None else str(file)
+        self.table = table
+        self.key = key
+
+    def __str__(self) -> str:
+        parts = []
+        if self.file:
+            parts.append(f"{self.file}:")
+        if self.table:
+            parts.append(f"[{self.table}]")
+        if self.key:
+            parts.append(f"key '{self.key}':")
+        elif self.table:
+            parts[-1] += ":"
+        parts.append(self.message)
+        return " ".join(parts)
+
+
+class StudyError(CellError):
+    """A bad study file or option, naming the file, table and key (formatted like CellError)."""

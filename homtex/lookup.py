@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .output.io import read_netcdf, write_netcdf
 
 __all__ = ["Lookup"]
 
@@ -394,14 +395,12 @@ class Lookup:
 
     def save(self, path) -> Path:
         """Write the lookup to a netCDF file (atomic)."""
-        from .output.io import write_netcdf
 
         return write_netcdf(self.to_dataset(), path)
 
     @classmethod
     def load(cls, path) -> "Lookup":
         """Read a lookup written by :meth:`save` (refits the interpolator; the hold-out is read back)."""
-        from .output.io import read_netcdf
 
         ds = read_netcdf(path)
         a = ds.attrs

@@ -51,7 +51,13 @@ import time
 
 import numpy as np
 
+import xarray as xr
+
+from .api import compress
 from .errors import InputError
+from .lookup import Lookup
+from .model.results import Status, set_status
+from .seams import seam_profile
 
 __all__ = ["macro_curve", "column_heights", "unseamed_law"]
 
@@ -79,7 +85,6 @@ def unseamed_law(curve):
     Dataset: ``stress`` (kPa) over ``strain`` (the point (0, 0) is prepended if missing);
     callable: vectorised stress_kPa(strain), eps_max = inf.
     """
-    from .lookup import Lookup
 
     if callable(curve) and not isinstance(curve, Lookup):
         return (lambda e: np.asarray(curve(np.asarray(e, dtype=float)), dtype=float)), math.inf
@@ -179,8 +184,6 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     ``strain`` (1), ``engaged_fraction`` (1); ``column_height`` (n_columns,) mm over
     ``column_x``; attrs: H0, cushion heights, model settings, ``seconds``.
     """
-    import xarray as xr
-
     t0 = time.perf_counter()
     if pre_stress not in PRE_STRESS:
         raise InputError(f"macro_curve: pre_stress must be one of {PRE_STRESS}, got {pre_stress!r}")
@@ -200,7 +203,6 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     if curve is None:
         if cell is None:
             raise InputError("macro_curve: give a cell or a compression curve")
-        from .contact import compress
 
         ts = time.perf_counter()
         curve = compress(cell, strain=strain, **(compress_options or {}))
@@ -208,19 +210,20 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     if seam_distance is not None and profile is None:
         if cell is None:
             raise InputError("macro_curve: seam_distance needs a cell or a profile")
-        from .seams import seam_profile
 
         ts = time.perf_counter()
         profile = seam_profile(cell, seam_distance=seam_distance, **(profile_options or {}))
         t_sub += time.perf_counter() - ts
     H0 = _thickness(cell, curve, thickness)
     law, eps_max = unseamed_law(curve)
-    status = "ok"
+    status, detail = Status.OK, ""
     eps_end = float(strain)
     if eps_max < strain - 1e-12:
         eps_end = eps_max
-        status = (f"the unseamed compression curve ends at strain {eps_max:.4g} < {strain:.4g} "
-                  f"(status: {getattr(curve, 'attrs', {}).get('status', 'unknown')}); curve truncated")
+        attrs = getattr(curve, "attrs", {})
+        why = attrs.get("status_detail", attrs.get("status", "unknown"))
+        status, detail = Status.FAILED, (f"the unseamed compression curve ends at strain {eps_max:.4g} < "
+                                         f"{strain:.4g} (its status: {why}); curve truncated")
     x, h, cushion = column_heights(H0, seam_distance=seam_distance, profile=profile, height_scatter=height_scatter,
                                    plate_area=plate_area, n_columns=int(n_columns), seed=seed,
                                    seam_offset=seam_offset)
@@ -285,5 +288,5 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                "cushion_height_mean_mm": float(np.mean(list(per.values()))),
                "cushion_height_min_mm": float(min(per.values())), "cushion_height_max_mm": float(max(per.values())),
                "first_contact_mm": float(H0 - h.max()), "full_contact_mm": float(H0 - h.min()),
-               "seconds": seconds, "seconds_inputs": t_sub, "status": status})
-    return ds
+               "seconds": seconds, "seconds_inputs": t_sub})
+    return set_status(ds, status, detail)

@@ -198,7 +198,8 @@ def stall_case(direct_name: str, r: int = 6, nel: int = 8, maxiter: int = 3000) 
     from homtex.errors import SolverError
     from homtex.fem.assembly import Assembler
     from homtex.geometry.lattices import lattice_frame
-    from homtex.linalg.solvers import LinearSolver, constrain, rigid_body_modes
+    from homtex.linalg.nullspace import rigid_body_modes
+from homtex.linalg.solvers import LinearSolver, constrain
 
     f = lattice_frame("bcc", radius=0.01, E=E_MOD, nu=NU, elements_per_strut=nel, repeat=(r, r, r),
                       periodic=False)
@@ -233,7 +234,8 @@ def run(out: Path, repeats, *, threads: int, direct_limit: float, jacobi_maxiter
 
     from homtex.fem.assembly import Assembler, assemble_reference
     from homtex.errors import SolverError
-    from homtex.linalg.solvers import LinearSolver, _cholmod, constrain, rigid_body_modes
+    from homtex.linalg.nullspace import rigid_body_modes
+from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
 
     direct_name = "direct_cholmod" if _cholmod is not None else "direct_superlu"
     methods = ["amg", "cg_jacobi", direct_name, "opensees"]

@@ -43,7 +43,7 @@ def measure(r: int, tol: float, sequential: bool = True, waviness: float = 0.1) 
     """Timings (s), iterations and C of the r^3 supercell: one solve, sequential, batched."""
     import homtex
     from homtex.geometry.lattices import lattice_frame
-    from homtex.linalg.krylov import solve_many
+    from homtex.linalg.multirhs import solve_many
     from homtex.analysis.periodic import _Operator, unit_strains
 
     frame = lattice_frame("octet", radius=RADIUS, E=E_MOD, nu=NU, elements_per_strut=NEL,

@@ -111,7 +111,7 @@ def run(out: Path, full: bool = False):
     factors = 10.0 ** np.arange(-6, 9)
     combos = [("penalty", "direct"), ("penalty", "amg"), ("augmented", "direct"), ("augmented", "amg")]
     fr, fixed, loads, F_hand = crossing()
-    from homtex.contact.solve import ContactSolver
+    from homtex.contact.solver import ContactSolver
 
     k0 = ContactSolver(fr, fixed, loads, Contact()).k
     code = np.zeros((len(factors), len(combos)), dtype=np.int64)

@@ -33,7 +33,7 @@ import xarray as xr
 from scipy.optimize import brentq, least_squares
 
 import homtex
-from homtex.seams.yarn import _green, fabric_modulus, layer_rigidity
+from homtex.seams.foundation import _green, fabric_modulus, layer_rigidity
 
 HERE = Path(__file__).resolve().parent
 TARGET = {18.0: 10.23, 24.0: 14.33, 43.0: 20.3}   # the paper's simulated cushion heights, mm

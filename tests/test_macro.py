@@ -172,10 +172,11 @@ def test_truncated_curve_is_reported():
 
     e = np.linspace(0.05, 0.2, 4)
     curve = xr.Dataset({"stress": ("strain", 40 * e)}, coords={"strain": e},
-                       attrs={"thickness_mm": H0, "status": "failed at step 5"})
+                       attrs={"thickness_mm": H0, "status": "failed", "status_detail": "failed at step 5"})
     ds = macro_curve(curve=curve, strain=0.5)
     assert ds.strain.values[-1] == pytest.approx(0.2)
-    assert "truncated" in ds.attrs["status"] and "failed at step 5" in ds.attrs["status"]
+    assert ds.attrs["status"] == "failed"
+    assert "truncated" in ds.attrs["status_detail"] and "failed at step 5" in ds.attrs["status_detail"]
 
 
 def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
@@ -183,7 +184,7 @@ def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
     from pathlib import Path
 
     seams = pytest.importorskip("homtex.seams")
-    import homtex.contact as contact
+    import homtex.macro as macro
     import xarray as xr
 
     cell_file = Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml"
@@ -194,7 +195,7 @@ def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
     cell = homtex.load_cell(cell_file, build=False)
     calls = []
 
-    real = contact.compress
+    real = macro.compress
 
     def fake_compress(c, *, strain, **kw):  # the yarn-level curve to 60 % is slow: a linear stand-in
         if strain != 0.6:  # seam_profile's own small-strain modulus: the real thing
@@ -204,7 +205,7 @@ def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
         return xr.Dataset({"stress": ("strain", 40.0 * e)}, coords={"strain": e},
                           attrs={"thickness_mm": H0, "status": "ok"})
 
-    monkeypatch.setattr(contact, "compress", fake_compress)
+    monkeypatch.setattr(macro, "compress", fake_compress)
     first = {}
     for d in (43.0, 24.0, 18.0):
         ds = macro_curve(cell, seam_distance=d, strain=0.6, steps=301,

@@ -7,7 +7,8 @@ import pytest
 
 import homtex
 from homtex.errors import InputError
-from homtex.geometry.seam import seam_cell, tile_frame
+from homtex.geometry.seam import seam_cell
+from homtex.geometry.tiling import tile_frame
 
 D_SMALL = 12.7   # 3 fabric repeats (6 wales): small, fast seam cells for the physics checks
 
@@ -195,7 +196,7 @@ def test_pdas_keeps_a_part_held_on_the_first_small_plate_step(cell, monkeypatch)
     Still smaller steps (0.1 mm) failed one stage later: a re-detection round starts from the
     contacts with force > 0, and the holding ones had ended at zero force; that start set now
     falls back to all candidates."""
-    from homtex.contact.solve import ContactSolver
+    from homtex.contact.solver import ContactSolver
     from homtex.seams import seam_compression
 
     unions = []
@@ -324,4 +325,4 @@ def test_ramp_refuses_a_thread_that_went_through(cell):
         c = cell.replace(**{"parameters.bars.top_inlay.lapping": lap, "parameters.bars.bottom_inlay.lapping": lap,
                             "yarns.multifilament.bending_factor": 100.0, "yarns.multifilament.torsion_factor": 100.0})
         p = homtex.seam_profile(c, seam_distance=24.0, prestrain=0.7, steps=8)
-    assert p.attrs["status"].startswith("failed") and "bobbin thread slipped through the bottom layer" in p.attrs["status"]
+    assert p.attrs["status"] == "failed" and "bobbin thread slipped through the bottom layer" in p.attrs["status_detail"]

@@ -7,7 +7,8 @@ import pytest
 
 import homtex
 from homtex.errors import InputError
-from homtex.geometry.spacer import parse_lapping, parse_threading, spacer_fabric
+from homtex.geometry.lapping import parse_lapping, parse_threading
+from homtex.geometry.spacer import spacer_fabric
 from homtex.model.sections import YarnType
 
 CELL = "cells/spacer_20mm.toml"
@@ -148,7 +149,7 @@ def test_compression_monotone_and_linear_range(curve):
 
 
 def test_supercell_gives_same_stress(cell, curve):
-    from homtex.analysis.periodic import periodize  # noqa: F401  (ensure the module exists)
+    from homtex.geometry.tiling import periodize  # noqa: F401  (ensure the module exists)
     fr = cell.frame
     n = fr.n_nodes
     P = fr.periods

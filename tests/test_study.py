@@ -13,7 +13,8 @@ import pytest
 import xarray as xr
 
 from homtex.errors import InputError
-from homtex.output.io import check_meta, read_netcdf
+from homtex.output.datasets import check_meta
+from homtex.output.io import read_netcdf
 from homtex.study import StudyError, load_study, run_study
 
 ROOT = Path(__file__).resolve().parents[1]

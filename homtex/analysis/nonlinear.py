@@ -17,7 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config import option
 from ..errors import InputError, SolverError
+from ..model.results import ENERGY_KEYS
 from ..fem.assembly import Assembler
 from ..fem.corotational import add_geometric, corotational_response, gather_ends, log_nodes, rotate_nodes
 from ..model.frame import Frame
@@ -155,7 +157,7 @@ class NonlinearResult:
 
 
 def solve_nonlinear(frame: Frame, fixed=None, loads=None, *, steps: int = 10, tol: float = 1e-9,
-                    max_iter: int = 40, geometric: str = "full", solver: str = "direct") -> NonlinearResult:
+                    max_iter: int = 40, geometric: str = "full", solver: str | None = None) -> NonlinearResult:
     """Large-rotation static solve of a frame without contact; loads (and prescribed
     translations) ramp linearly over ``steps`` equal load steps, Newton iterations in each.
 
@@ -178,6 +180,7 @@ def solve_nonlinear(frame: Frame, fixed=None, loads=None, *, steps: int = 10, to
         raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
     if int(steps) < 1:
         raise InputError(f"steps must be >= 1, got {steps!r}")
+    solver = option("nonlinear_solver", solver)
     n = frame.n_nodes
     mask, up = parse_fixed(fixed, n)
     if np.any(up.reshape(n, 6)[:, 3:] != 0.0):
@@ -218,8 +221,6 @@ def solve_nonlinear(frame: Frame, fixed=None, loads=None, *, steps: int = 10, to
                               f"{max_iter} Newton iterations (out-of-balance force {res_norm:.3e} N, "
                               f"tolerance {tol:g} x {ref:.3e} N); use more steps")
         history.append((lam, it - 1, res_norm))
-    from .static import ENERGY_KEYS
-
     fint = cor.evaluate()
     reactions = np.where(mask.reshape(n, 6), fint - f_ext.reshape(n, 6), 0.0)
     return NonlinearResult(frame=frame, u=cor.u(), x=cor.positions, Q=cor.Q.copy(), forces=cor.forces.copy(),

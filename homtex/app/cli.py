@@ -16,11 +16,18 @@ message and a non-zero exit status, never as a traceback.
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 from pathlib import Path
 
+from .._version import __version__
 from ..errors import InputError, SolverError
+from ..study import run_study
+from .commands import cell_summary, compress_cell, homogenize_cell, macro_cell, plot_file, seam_cell
+from .main_job import main_job
+
+log = logging.getLogger("homtex")
 
 
 def _out(args, default: str) -> Path:
@@ -34,8 +41,6 @@ def _say(msg: str) -> None:
 
 
 def cmd_run(args) -> None:
-    from .jobs import main_job
-
     t0 = time.perf_counter()
     outputs = main_job(_out(args, "results"), quick=args.quick)
     _say(f"\nmain job finished in {time.perf_counter() - t0:.1f} s; outputs:")
@@ -44,15 +49,11 @@ def cmd_run(args) -> None:
 
 
 def cmd_cell(args) -> None:
-    from .jobs import cell_summary
-
     for name, path in cell_summary(args.cell, _out(args, "results/cell")).items():
         _say(f"  {name:<20s} {path}")
 
 
 def cmd_homogenize(args) -> None:
-    from .jobs import homogenize_cell
-
     ds, paths = homogenize_cell(args.cell, _out(args, "results/homogenize"), solver=args.solver)
     _say(str(ds))
     for p in paths:
@@ -60,8 +61,6 @@ def cmd_homogenize(args) -> None:
 
 
 def cmd_compress(args) -> None:
-    from .jobs import compress_cell
-
     ds, paths = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
                               steps=args.steps)
     _say(str(ds))
@@ -70,8 +69,6 @@ def cmd_compress(args) -> None:
 
 
 def cmd_seam(args) -> None:
-    from .jobs import seam_cell
-
     ds, paths = seam_cell(args.cell, _out(args, "results/seam"), seam_distance=args.distance,
                           prestrain=args.prestrain, method=args.method)
     _say(f"cushion height {float(ds['cushion_height']):.2f} mm, seam line {float(ds['seam_height']):.2f} mm "
@@ -82,8 +79,6 @@ def cmd_seam(args) -> None:
 
 
 def cmd_macro(args) -> None:
-    from .jobs import macro_cell
-
     ds, paths = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
                            height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
                            slack_travel=args.slack_travel, seam_method=args.seam_method)
@@ -93,23 +88,17 @@ def cmd_macro(args) -> None:
 
 
 def cmd_study(args) -> None:
-    from ..study import run_study
-
     ds = run_study(args.study, args.out, scheduler=args.scheduler)
     _say(str(ds))
     _say(f"  wrote {Path(args.out) / 'result.nc'}")
 
 
 def cmd_plot(args) -> None:
-    from .jobs import plot_file
-
     _say(f"  wrote {plot_file(args.file, args.out)}")
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="homtex", description=__doc__.split("\n")[0])
-    from .. import __version__
-
     p.add_argument("--version", action="version", version=f"homtex {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -174,13 +163,25 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _log_to_console() -> logging.Handler:
+    """INFO and above from the homtex loggers on stdout (what a long stage is doing)."""
+    handler = logging.StreamHandler(sys.stdout)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    return handler
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    handler = _log_to_console()
     try:
         args.func(args)
     except (InputError, SolverError, FileNotFoundError) as exc:
         print(f"homtex {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        log.removeHandler(handler)
     return 0
 
 

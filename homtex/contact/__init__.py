@@ -1,12 +1,13 @@
 """Contact between yarns and with rigid plates; compression tests.
 
-Public: :class:`Contact` (options), :class:`Plate` (rigid plane), :func:`compress`
-(compression curve as an xarray Dataset). ``homtex.solve_static(..., contact=Contact())``
-solves a frame with contact (see :mod:`homtex.contact.solve`).
+Public: :class:`Contact` (options), :class:`~homtex.model.scene.Plate` (rigid plane),
+:class:`ContactSolver` and :func:`solve_contact` (what ``homtex.solve_static(..., contact=...)``
+runs). ``homtex.compress`` (in :mod:`homtex.api`) runs :func:`homtex.contact.compress.run_compression`.
 """
 
-from .constraints import ContactSet, Plate
-from .solve import Contact, ContactSolver, solve_contact
-from .compress import compress  # noqa: E402  (the function shadows the submodule name)
+from ..model.scene import Plate
+from .constraints import ContactSet
+from .options import Contact
+from .solver import ContactSolver, solve_contact
 
-__all__ = ["Contact", "ContactSet", "ContactSolver", "Plate", "compress", "solve_contact"]
+__all__ = ["Contact", "ContactSet", "ContactSolver", "Plate", "solve_contact"]

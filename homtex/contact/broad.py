@@ -19,7 +19,7 @@ import itertools
 import numpy as np
 from numba import njit, prange
 
-from .narrow import closest_params
+from .narrow import closest_params, segment_pairs
 
 
 # ----------------------------------------------------------------------------------------
@@ -370,7 +370,6 @@ def find_pairs_kdtree(p0, d, radius, margin, box=None):
     """
     from scipy.spatial import cKDTree
 
-    from .narrow import segment_pairs
 
     p0 = np.asarray(p0, float)
     d = np.asarray(d, float)

@@ -20,54 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import InputError
 from .narrow import segment_pairs
-
-
-@dataclass
-class Plate:
-    """A rigid, frictionless plane z = ``z`` (mm) that the yarns cannot cross.
-
-    Parameters
-    ----------
-    z : height of the plane, mm.
-    normal : +1 when the yarns lie above the plate (a bottom plate), -1 when below (a top plate).
-    displacement : prescribed motion of the plate along z, mm (default 0: fixed).
-    force : force (N) pressing the plate against the yarns (force control; its
-        motion is then an unknown).
-    pressure, area : alternatively a pressure (kPa) on an area (mm^2): force = pressure * area * 1e-3.
-    """
-
-    z: float
-    normal: int = 1
-    displacement: float | None = None
-    force: float | None = None
-    pressure: float | None = None
-    area: float | None = None
-    name: str = ""
-
-    def __post_init__(self):
-        if self.normal not in (1, -1):
-            raise InputError(f"Plate.normal must be +1 (yarns above) or -1 (yarns below), got {self.normal!r}")
-        if not np.isfinite(float(self.z)):
-            raise InputError(f"Plate.z must be finite, got {self.z!r}")
-        if self.pressure is not None:
-            if self.force is not None:
-                raise InputError("Plate: give either 'force' or 'pressure' (with 'area'), not both")
-            if self.area is None or not (float(self.area) > 0):
-                raise InputError("Plate.pressure needs a positive 'area' (mm^2)")
-            self.force = float(self.pressure) * float(self.area) * 1e-3
-        if self.force is not None and self.displacement is not None:
-            raise InputError("Plate: give either 'displacement' (displacement control) or 'force' "
-                             "(force control), not both")
-        for name in ("displacement", "force"):
-            v = getattr(self, name)
-            if v is not None and not np.isfinite(float(v)):
-                raise InputError(f"Plate.{name} must be finite, got {v!r}")
-
-    @property
-    def force_controlled(self) -> bool:
-        return self.force is not None
 
 
 @dataclass
@@ -210,14 +163,6 @@ def build_rows(frame, x, ea, eb, image, pnode, pidx, plates, plate_z, node_radiu
     return Rows(C=C, g=np.concatenate([g_y, g_p]), ea=np.asarray(ea, np.int64), eb=np.asarray(eb, np.int64),
                 image=image, s=s, t=t, normal=nrm, pnode=np.asarray(pnode, np.int64),
                 pidx=np.asarray(pidx, np.int64), keys=keys)
-
-
-def node_contact_radius(frame) -> np.ndarray:
-    """(n,) largest contact radius of the elements at each node, mm."""
-    r = np.zeros(frame.n_nodes)
-    np.maximum.at(r, frame.elements[:, 0], frame.contact_radius)
-    np.maximum.at(r, frame.elements[:, 1], frame.contact_radius)
-    return r
 
 
 def point_keys(frame, ea, eb, image, s, t, tol: float = 1e-9) -> np.ndarray:

@@ -1,12 +1,12 @@
 """Contact with large rotations: Newton's method whose every step is a contact solve.
 
 At the current state (translations u_k, nodal rotations Q_k) the co-rotational frame gives its
-internal forces f_int and tangent K_t (:class:`homtex.nonlinear.Corotational`); the step du solves
+internal forces f_int and tangent K_t (:class:`homtex.analysis.nonlinear.Corotational`); the step du solves
 the contact problem of the linearised frame
 
     min 1/2 du K_t du - (f_ext - f_int) du   subject to   g(u_k) + C(u_k) du >= 0,
 
-i.e. :class:`~homtex.contact.solve.ContactSolver` with K = K_t, loads f_ext - f_int + K_t u_ref and the
+i.e. :class:`~homtex.contact.solver.ContactSolver` with K = K_t, loads f_ext - f_int + K_t u_ref and the
 contact rows re-detected and rebuilt at u_k. Steps repeat until the increment is below ``tol``
 (relative to the mean element length; rotations in rad): the final state is in equilibrium with
 the contact forces of the final active set, the contact gaps are those of the current geometry.
@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SolverError
+from ..model.results import ENERGY_KEYS
 
 
 def newton_contact(cs, cor, *, prestrain_scale: float = 1.0, plate_u=None, warm_keys=None, warm_forces=None,
@@ -53,13 +54,11 @@ def newton_contact(cs, cor, *, prestrain_scale: float = 1.0, plate_u=None, warm_
     (result, plate_u, iterations): the last contact solve's StaticResult with ``u`` (n, 6)
     (translations, rotation vectors), ``forces`` and ``energy`` of the co-rotational state.
     """
-    from ..analysis.static import ENERGY_KEYS
-
     n, N, P = cs.n, cs.N, cs.P
     frame = cs.frame
     state = cor.copy_state()
     pu = np.zeros((P, 6)) if plate_u is None else np.array(plate_u, dtype=float).reshape(P, 6)
-    f_plate = cs.f[6 * n:].copy()                 # plate loads (force control), never touched by K
+    f_plate = cs.plate_load                       # plate loads (force control), never touched by K
     length = float(frame.length.mean())
     u0 = cor.ut.copy()
     cdiag = None
@@ -84,7 +83,7 @@ def newton_contact(cs, cor, *, prestrain_scale: float = 1.0, plate_u=None, warm_
             u_ref[:n, :3] = cor.ut
             u_ref[n:] = pu
             ur = u_ref.ravel()
-            cs.f = np.concatenate([cs.f_loads - fint.ravel(), f_plate]) + cs.K_ext @ ur
+            cs.set_frame_load(cs.f_loads - fint.ravel() + cs.K @ ur[:6 * n])
             res = cs.solve(u_ref=u_ref, warm_keys=warm_keys, warm_forces=warm_forces)
             du = res.extra["u_ext"] - u_ref
             if not np.all(np.isfinite(du)):

@@ -79,6 +79,12 @@ def assemble_kernel(node_ptr, inc_elem, inc_end, slot_self, slot_other,
                               a_z, b_z, c_z, d_z, 1.0)
 
 
+def element_arrays(frame) -> tuple:
+    """Per-element arrays the kernels take: (R (m, 3, 3), L, EA, GJ, EIy, EIz, kGA (m,)), mm, N, N mm^2."""
+    f = frame
+    return (f.R, f.length, f.E * f.A, f.G * f.J, f.E * f.Iy, f.E * f.Iz, f.k * f.G * f.A)
+
+
 class Assembler:
     """Assembles a frame's stiffness; the pattern is built once and reused.
 
@@ -92,8 +98,8 @@ class Assembler:
         self._K = None
 
     def element_arrays(self):
-        f = self.frame
-        return (f.R, f.length, f.E * f.A, f.G * f.J, f.E * f.Iy, f.E * f.Iz, f.k * f.G * f.A)
+        """(R, L, EA, GJ, EIy, EIz, kGA) of the frame (:func:`element_arrays`)."""
+        return element_arrays(self.frame)
 
     def stiffness(self, element_arrays=None) -> sp.bsr_matrix:
         """Global stiffness (6n x 6n BSR). ``element_arrays`` overrides (R, L, EA, GJ, EIy, EIz, kGA)."""

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import CellError, InputError
+from ..validate import check_keys, get_int, get_list, get_number, get_str
 from ..model.frame import Frame
 
 
@@ -228,7 +229,6 @@ _COMMON = ("repeat", "yarn", "waviness")
 
 
 def _pick_yarn(parameters, yarns, table="parameters"):
-    from ..cells import CellError, get_str
 
     if "yarn" in parameters:
         name = get_str(parameters, "yarn", table)
@@ -243,7 +243,6 @@ def _pick_yarn(parameters, yarns, table="parameters"):
 
 
 def _build(cell: LatticeCell, parameters, yarns, resolution, table="parameters"):
-    from ..cells import CellError, check_keys, get_int, get_list, get_number
 
     y = _pick_yarn(parameters, yarns, table)
     check_keys(resolution, ("elements_per_strut",), "resolution")
@@ -267,7 +266,6 @@ def build_honeycomb(parameters: dict, yarns: dict, resolution: dict):
     [parameters]: h, l (mm, > 0), theta (degrees, in (-90, 90), non-zero; < 0 re-entrant),
     optional repeat = [nx, ny], yarn, waviness. [resolution]: elements_per_strut.
     """
-    from ..cells import CellError, check_keys, get_number
 
     t = "parameters"
     check_keys(parameters, ("h", "l", "theta", *_COMMON), t)
@@ -285,7 +283,6 @@ def build_honeycomb(parameters: dict, yarns: dict, resolution: dict):
 
 def _spacing_builder(gen, doc):
     def build(parameters: dict, yarns: dict, resolution: dict):
-        from ..cells import check_keys, get_number
 
         check_keys(parameters, ("a", *_COMMON), "parameters")
         a = get_number(parameters, "a", "parameters", gt=0)
@@ -310,7 +307,6 @@ def build_lattice(parameters: dict, yarns: dict, resolution: dict):
     indices), images (s x k integer offsets of each strut's second point), optional repeat,
     yarn, waviness. [resolution]: elements_per_strut.
     """
-    from ..cells import CellError, check_keys, get_list
 
     t = "parameters"
     check_keys(parameters, ("basis", "points", "struts", "images", *_COMMON), t)

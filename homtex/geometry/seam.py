@@ -38,7 +38,9 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..model.frame import Frame
+from ..model.frame import Frame, stack_fields
+from .curves import segment_distances
+from .tiling import tile_frame
 
 
 def seam_tiling(cell, seam_distance: float, stitch_length: float, *, stitches: int = 1,
@@ -91,60 +93,10 @@ def seam_tiling(cell, seam_distance: float, stitch_length: float, *, stitches: i
     return {"n_x": n_x, "n_y": int(round(qy)), "seam_distance": n_x * Lx, "requested": d, "Lx": Lx, "Ly": Ly}
 
 
-def _physical_yarns(n, ea, eb, yarn, bond):
-    """Yarn id per element of a tiled frame: one id per connected chain of same-yarn elements
-    (a yarn that leaves one copy continues in the next); bonds take the id of their second node."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    keep = ~bond
-    g = coo_matrix((np.ones(int(keep.sum())), (ea[keep], eb[keep])), shape=(n, n))
-    _, lab = connected_components(g, directed=False)
-    # renumber in order of first appearance along the elements (stable, deterministic)
-    first = lab[np.where(keep, ea, eb)]
-    _, inv = np.unique(first, return_inverse=True)
-    return inv.astype(np.int64)
-
-
-def tile_frame(frame: Frame, n_x: int, n_y: int, bond=None):
-    """Tile a 2-periodic frame n_x x n_y times.
-
-    Returns (frame, node_copy (n',) copy index i*n_y + j, elem_copy (m',), elem_src (m',) source element).
-    Yarn ids are renumbered per physical yarn (connected chain of elements that are not bonds;
-    ``bond`` (m,) bool marks the base frame's bond elements, which take the id of their second node).
-    """
-    n, m = frame.n_nodes, frame.n_elements
-    bond = np.zeros(m, dtype=bool) if bond is None else np.asarray(bond, dtype=bool)
-    p = frame.periods
-    ncp = n_x * n_y
-    ii, jj = np.divmod(np.arange(ncp), n_y)
-    nodes = (frame.nodes[None, :, :] + (ii[:, None, None] * p[0] + jj[:, None, None] * p[1])).reshape(-1, 3)
-    img = frame.images
-    a = frame.elements[:, 0]
-    b = frame.elements[:, 1]
-    ti = ii[:, None] + img[None, :, 0]
-    tj = jj[:, None] + img[None, :, 1]
-    ci, new_ix = np.mod(ti, n_x), np.floor_divide(ti, n_x)
-    cj, new_iy = np.mod(tj, n_y), np.floor_divide(tj, n_y)
-    ea = (np.arange(ncp)[:, None] * n + a[None, :]).ravel()
-    eb = ((ci * n_y + cj) * n + b[None, :]).ravel()
-    images = np.column_stack([new_ix.ravel(), new_iy.ravel()])
-    yarn = _physical_yarns(n * ncp, ea, eb, np.tile(frame.yarn, ncp), np.tile(bond, ncp))
-    rep = lambda v: np.tile(v, ncp)  # noqa: E731
-    out = Frame(nodes, np.column_stack([ea, eb]), semi_axes=np.column_stack([rep(frame.a), rep(frame.b)]),
-                E=rep(frame.E), nu=rep(frame.nu), yarn=yarn, ref=np.tile(frame.R[:, 1], (ncp, 1)),
-                periods=np.array([n_x * p[0], n_y * p[1]]), images=images,
-                contact_radius=rep(frame.contact_radius), prestrain=rep(frame.prestrain),
-                bending_factor=rep(frame.bending_factor), torsion_factor=rep(frame.torsion_factor))
-    return out, np.repeat(np.arange(ncp), n), np.repeat(np.arange(ncp), m), np.tile(np.arange(m), ncp)
-
-
 def leg_position(cell, r_stitch: float, ny: int = 40) -> tuple[float, float, float]:
     """Needle-hole position (x_s, y_s) (mm) with the most clearance (mm) between the stitch legs and
     the fabric's yarns: candidates are the wale centres (k + 1/2) w of the repeat and ``ny`` points
     along y. The needle pierces between yarns; the legs then start free of the fabric."""
-    from .spacer import segment_distances
-
     f = cell.frame
     Lx, Ly = float(f.periods[0, 0]), float(f.periods[1, 1])
     w = float(cell.info["wale_spacing"])
@@ -266,15 +218,13 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
     ref[:, 0] = np.where(is_leg, 1.0, 0.0)
     ref[:, 2] = np.where(is_leg, 0.0, 1.0)
     nodes = np.vstack([fab.nodes, s_nodes])
-    frame = Frame(nodes, np.vstack([fab.elements, s_el]),
-                  semi_axes=np.column_stack([np.r_[fab.a, rad], np.r_[fab.b, rad]]),
-                  E=np.r_[fab.E, np.full(ms, E_s)], nu=np.r_[fab.nu, np.full(ms, nu_s)],
-                  yarn=np.r_[fab.yarn, np.full(ms, sid)], ref=np.vstack([fab.R[:, 1], ref]),
-                  periods=fab.periods, images=np.vstack([fab.images, s_img]),
-                  contact_radius=np.r_[fab.contact_radius, np.full(ms, r_s)],
-                  prestrain=np.r_[np.zeros(fab.n_elements), np.full(ms, eps0)],
-                  bending_factor=np.r_[fab.bending_factor, np.ones(ms)],
-                  torsion_factor=np.r_[fab.torsion_factor, np.ones(ms)])
+    fab_fields = fab.element_fields()
+    fab_fields["prestrain"] = np.zeros(fab.n_elements)
+    stitch_fields = {"semi_axes": np.column_stack([rad, rad]), "E": np.full(ms, E_s), "nu": np.full(ms, nu_s),
+                     "yarn": np.full(ms, sid), "ref": ref, "contact_radius": np.full(ms, r_s),
+                     "prestrain": np.full(ms, eps0)}
+    frame = Frame(nodes, np.vstack([fab.elements, s_el]), periods=fab.periods,
+                  images=np.vstack([fab.images, s_img]), **stack_fields(fab_fields, stitch_fields))
     m_f = fab.n_elements
     groups = {}
     for g, mask in (cell.groups or {}).items():

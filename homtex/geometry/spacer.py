@@ -71,16 +71,19 @@ name) to element masks.
 
 from __future__ import annotations
 
-import math
-import re
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..model.frame import Frame
-from ..model.sections import YarnType
+from ..model.sections import YarnType, yarn_fields
+from .curves import catmull_rom_periodic, overlap_summary, reference_vectors, wrap_chain, yarn_overlaps
+from .lapping import Bar, as_bar, lcm, parse_lapping, parse_threading
+
+__all__ = ["INCH", "SHAPE_DEFAULTS", "build_cell", "layer_levels", "spacer_fabric"]
 
 INCH = 25.4  # mm
 
@@ -103,157 +106,6 @@ SHAPE_DEFAULTS = {
 
 
 # ----------------------------------------------------------------------------------------
-# knitting description
-@dataclass(frozen=True)
-class Bar:
-    """One guide bar.
-
-    name : the bar's name (used in errors and as the default yarn-system name).
-    lapping : chain notation, e.g. ``"1-0/0-1//"`` (see the module docstring).
-    yarn : name of its yarn type.
-    bed : "front" (top layer), "back" (bottom layer) or "both" (pile).
-    threading : "full", "1-in 1-out" or a pattern of ``x`` / ``.`` per wale.
-    system : yarn-system name for the element groups (default: ``name``).
-    """
-
-    name: str
-    lapping: str
-    yarn: str
-    bed: str = "front"
-    threading: str = "full"
-    system: str | None = None
-
-    @property
-    def group(self) -> str:
-        return self.system or self.name
-
-
-@dataclass
-class CourseLap:
-    """One course of a parsed lapping: laps on the front and back needle bar.
-
-    ``front`` / ``back`` are (a, b) guide positions or None when the bar does not
-    visit that layer in this course. ``a == b`` means an inlay at gap a.
-    """
-
-    token: str
-    front: tuple | None
-    back: tuple | None
-
-
-_TOKEN = re.compile(r"^\d+(-\d+)*$")
-
-
-def parse_lapping(text: str, bar: str = "bar", bed: str = "front") -> list[CourseLap]:
-    """Parse a lapping in chain notation (see the module docstring).
-
-    Parameters
-    ----------
-    text : e.g. ``"1-0/0-1//"`` or ``"1-0-3-4/3-4-1-0//"``.
-    bar : the bar's name (for error messages).
-    bed : "front", "back" or "both".
-
-    Returns
-    -------
-    list of :class:`CourseLap`, one per course of the repeat.
-
-    Raises
-    ------
-    InputError naming the bar and the offending token.
-    """
-    if bed not in ("front", "back", "both"):
-        raise InputError(f"bar {bar!r}: bed must be 'front', 'back' or 'both', got {bed!r}")
-    if not isinstance(text, str):
-        raise InputError(f"bar {bar!r}: lapping must be a string like '1-0/0-1//', got {text!r}")
-    s = "".join(text.split())
-    if not s:
-        raise InputError(f"bar {bar!r}: lapping is empty")
-    if not s.endswith("//"):
-        last = s.rstrip("/").split("/")[-1]
-        raise InputError(f"bar {bar!r}: lapping {text!r} does not close its repeat: it must end with "
-                         f"'//' after the last course (token {last!r})")
-    body = s[:-2]
-    if "//" in body:
-        extra = body.split("//", 1)[1]
-        raise InputError(f"bar {bar!r}: lapping {text!r} has tokens after the end of the repeat '//' "
-                         f"(token {extra.split('/')[0]!r}); write one repeat only")
-    if not body:
-        raise InputError(f"bar {bar!r}: lapping {text!r} has no course token before '//'")
-    courses = []
-    width = None
-    for pos, tok in enumerate(body.split("/")):
-        if not tok:
-            raise InputError(f"bar {bar!r}: lapping {text!r} has an empty course token at position {pos} "
-                             f"(a stray '/')")
-        if not _TOKEN.match(tok):
-            raise InputError(f"bar {bar!r}: token {tok!r} of lapping {text!r} does not parse: "
-                             f"expected guide positions like '1-0' or '1-0-3-4' (non-negative integers "
-                             f"joined by '-')")
-        nums = [int(v) for v in tok.split("-")]
-        if len(nums) not in (2, 4):
-            raise InputError(f"bar {bar!r}: token {tok!r} has {len(nums)} numbers; a course is 'a-b' "
-                             f"(one needle bar) or 'a-b-c-d' (front lap a-b, back lap c-d)")
-        if width is None:
-            width = len(nums)
-        elif len(nums) != width:
-            raise InputError(f"bar {bar!r}: token {tok!r} mixes {len(nums)}-number and {width}-number "
-                             f"courses in lapping {text!r}")
-        if len(nums) == 2:
-            pair = (nums[0], nums[1])
-            if bed == "both":
-                raise InputError(f"bar {bar!r} (bed 'both') needs double-needle-bar tokens "
-                                 f"'front-front-back-back', got token {tok!r}")
-            front, back = (pair, None) if bed == "front" else (None, pair)
-        else:
-            fp, bp = (nums[0], nums[1]), (nums[2], nums[3])
-            if bed == "front":
-                if bp[0] != bp[1]:
-                    raise InputError(f"bar {bar!r} has bed 'front' but token {tok!r} laps the back needle "
-                                     f"bar ({bp[0]}-{bp[1]}); use bed = 'both' for a pile bar")
-                front, back = fp, None
-            elif bed == "back":
-                if fp[0] != fp[1]:
-                    raise InputError(f"bar {bar!r} has bed 'back' but token {tok!r} laps the front needle "
-                                     f"bar ({fp[0]}-{fp[1]}); use bed = 'both' for a pile bar")
-                front, back = None, bp
-            else:
-                front = fp if fp[0] != fp[1] else None
-                back = bp if bp[0] != bp[1] else None
-                if front is None and back is None:
-                    raise InputError(f"bar {bar!r}: pile token {tok!r} laps neither needle bar")
-        for p in (front, back):
-            if p is not None and abs(p[0] - p[1]) > 1:
-                raise InputError(f"bar {bar!r}: token {tok!r} overlaps {abs(p[0] - p[1])} needles "
-                                 f"({p[0]}-{p[1]}); only single-needle overlaps (|a - b| = 1) are supported")
-        courses.append(CourseLap(tok, front, back))
-    if bed == "both":
-        for side, layer, other in (("back", "bottom", "front"), ("front", "top", "back")):
-            if all(getattr(c, side) is None for c in courses):
-                raise InputError(
-                    f"bar {bar!r}: pile lapping {text!r} never laps the {side} needle bar, so the pile never "
-                    f"reaches the {layer} layer (token {courses[0].token!r} and all others lap only the "
-                    f"{other} bar)")
-    return courses
-
-
-def parse_threading(spec: str, bar: str = "bar") -> np.ndarray:
-    """Threading pattern -> bool array (one per guide/wale of its repeat)."""
-    if not isinstance(spec, str):
-        raise InputError(f"bar {bar!r}: threading must be a string ('full', '1-in 1-out' or 'x.' pattern), "
-                         f"got {spec!r}")
-    key = spec.strip().lower().replace("_", "-").replace(" ", "")
-    if key in ("full", "all"):
-        return np.array([True])
-    if key in ("1-in1-out", "1in1out", "half"):
-        return np.array([True, False])
-    bad = [ch for ch in spec.strip() if ch not in "x.|-1"]
-    if bad or not spec.strip():
-        raise InputError(f"bar {bar!r}: threading {spec!r} is not 'full', '1-in 1-out' or a pattern of 'x' "
-                         f"(threaded) and '.' (empty) guides (bad character {bad[0] if bad else ''!r})")
-    pat = np.array([ch in "x|1" for ch in spec.strip()])
-    if not pat.any():
-        raise InputError(f"bar {bar!r}: threading {spec!r} threads no guide")
-    return pat
 
 
 # ----------------------------------------------------------------------------------------
@@ -279,211 +131,6 @@ def layer_levels(r_ground: float, r_inlay: float, r_pile: float, clearance: floa
     return d
 
 
-def catmull_rom_periodic(points: np.ndarray, closing: np.ndarray, n_per_segment: np.ndarray,
-                         alpha: float = 0.5) -> np.ndarray:
-    """Sample a centripetal Catmull-Rom curve through control points, periodic up to a translation.
-
-    Parameters
-    ----------
-    points : (k, 3) control points P_0..P_{k-1}; the curve continues with P_0 + closing.
-    closing : (3,) translation after one period.
-    n_per_segment : (k,) int, samples per segment P_i -> P_{i+1} (P_k = P_0 + closing).
-    alpha : 0.5 centripetal (no cusps or self-intersections within a segment).
-
-    Returns
-    -------
-    (sum(n_per_segment), 3) samples: for each segment its start point and n - 1 interior points.
-    """
-    P = np.asarray(points, float)
-    k = len(P)
-    D = np.asarray(closing, float)
-    ext = np.concatenate([P[-1:] - D, P, P[:2] + D])       # P_{-1}, P_0..P_{k-1}, P_k, P_{k+1}
-    p0, p1, p2, p3 = ext[:-3], ext[1:-2], ext[2:-1], ext[3:]
-    eps = 1e-12
-
-    def dt(a, b):
-        return np.maximum(np.linalg.norm(b - a, axis=1) ** alpha, eps)
-
-    t1 = dt(p0, p1)
-    t2 = t1 + dt(p1, p2)
-    t3 = t2 + dt(p2, p3)
-    n = np.asarray(n_per_segment, dtype=np.int64)
-    seg = np.repeat(np.arange(k), n)
-    local = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
-    frac = local / n[seg]
-    T1, T2, T3 = t1[seg, None], t2[seg, None], t3[seg, None]
-    t = T1 + frac[:, None] * (T2 - T1)
-    q0, q1, q2, q3 = p0[seg], p1[seg], p2[seg], p3[seg]
-    A1 = (T1 - t) / T1 * q0 + t / T1 * q1
-    A2 = (T2 - t) / (T2 - T1) * q1 + (t - T1) / (T2 - T1) * q2
-    A3 = (T3 - t) / (T3 - T2) * q2 + (t - T2) / (T3 - T2) * q3
-    B1 = (T2 - t) / T2 * A1 + t / T2 * A2
-    B2 = (T3 - t) / (T3 - T1) * A2 + (t - T1) / (T3 - T1) * A3
-    return (T2 - t) / (T2 - T1) * B1 + (t - T1) / (T2 - T1) * B2
-
-
-def wrap_chain(points: np.ndarray, periods: np.ndarray, closing_image: np.ndarray):
-    """Wrap a closed chain of unwrapped points into the periodic cell.
-
-    ``points`` (n, 3) are consecutive nodes of one yarn; the chain closes from the
-    last point to ``points[0] + closing_image @ periods``. Returns wrapped nodes
-    (n, 3), elements (n, 2) (local indices) and images (n, k) such that every
-    element vector equals the unwrapped difference.
-    """
-    P = np.asarray(periods, float)
-    G = P @ P.T
-    frac = np.linalg.solve(G, P @ points.T).T           # lattice coordinates (orthogonal in-plane cells)
-    cell = np.floor(frac + 1e-9).astype(np.int64)
-    wrapped = points - cell @ P
-    n = len(points)
-    a = np.arange(n)
-    b = np.roll(a, -1)
-    images = cell[b] - cell[a]
-    images[-1] += np.asarray(closing_image, dtype=np.int64)
-    return wrapped, np.column_stack([a, b]), images
-
-
-def segment_distances(p1, d1, p2, d2):
-    """Closest distance between segments p1 + s d1 and p2 + t d2 (s, t in [0, 1]), row-wise.
-
-    All arrays (q, 3). Returns (dist, s, t).
-    """
-    r = p1 - p2
-    a = np.einsum("ij,ij->i", d1, d1)
-    e = np.einsum("ij,ij->i", d2, d2)
-    f = np.einsum("ij,ij->i", d2, r)
-    c = np.einsum("ij,ij->i", d1, r)
-    b = np.einsum("ij,ij->i", d1, d2)
-    den = a * e - b * b
-    par = den <= 1e-12 * a * e
-    s = np.where(par, 0.0, np.clip((b * f - c * e) / np.where(par, 1.0, den), 0.0, 1.0))
-    t = (b * s + f) / e
-    s = np.where(t < 0.0, np.clip(-c / a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / a, 0.0, 1.0), s))
-    t = np.clip(t, 0.0, 1.0)
-    diff = p1 + s[:, None] * d1 - p2 - t[:, None] * d2
-    return np.linalg.norm(diff, axis=1), s, t
-
-
-def yarn_overlaps(frame: Frame, *, tol: float = 1e-9, arc_exclusion: float = 3.0) -> np.ndarray:
-    """Pairs of yarn segments that interpenetrate (distance < sum of contact radii).
-
-    Segments of different yarns, and segments of the same yarn further apart
-    along it than ``arc_exclusion * (r1 + r2)``, are checked, periodic images
-    included (shifts of -1, 0, +1 per lattice vector). Same-yarn exclusion
-    assumes each yarn's elements form a chain in element order (as the generators
-    build them).
-
-    Returns
-    -------
-    structured array with fields element_a, element_b, yarn_a, yarn_b (int64),
-    depth (mm, r1 + r2 - distance > tol) and image (k,) of b, sorted by depth
-    (largest first); each pair once.
-    """
-    from scipy.spatial import cKDTree
-
-    x0 = frame.nodes[frame.elements[:, 0]]
-    d = frame.element_vectors
-    m = frame.n_elements
-    rc = frame.contact_radius
-    mid = x0 + 0.5 * d
-    k = frame.dim_periodic
-    imgs = np.array(np.meshgrid(*[[-1, 0, 1]] * k, indexing="ij")).reshape(k, -1).T if k else np.zeros((1, 0))
-    imgs = imgs.astype(np.int64)
-    shifts = imgs @ frame.periods if k else np.zeros((1, 3))
-    reach = float(frame.length.max() + 2.0 * rc.max())
-    tree = cKDTree(mid)
-    ea, eb, ei = [], [], []
-    for q, sh in enumerate(shifts):
-        # sparse distance matrix between the original midpoints and the shifted ones
-        other = cKDTree(mid + sh)
-        sdm = tree.sparse_distance_matrix(other, reach, output_type="coo_matrix")
-        a, b = sdm.row.astype(np.int64), sdm.col.astype(np.int64)
-        ea.append(a)
-        eb.append(b)
-        ei.append(np.full(len(a), q))
-    a = np.concatenate(ea)
-    b = np.concatenate(eb)
-    qi = np.concatenate(ei)
-    # each unordered pair once: a < b, or a == b with a "positive" image
-    img = imgs[qi]
-    zero = np.all(img == 0, axis=1)
-    if k:
-        first = np.zeros(len(img), dtype=np.int64)
-        for c in range(k - 1, -1, -1):
-            first = np.where(img[:, c] != 0, img[:, c], first)
-    else:
-        first = np.zeros(len(img), dtype=np.int64)
-    keep = (a < b) | ((a == b) & ~zero & (first > 0))
-    a, b, qi = a[keep], b[keep], qi[keep]
-    # same yarn: exclude neighbours along the yarn
-    same = frame.yarn[a] == frame.yarn[b]
-    if same.any():
-        L = frame.length
-        cum = np.cumsum(L) - L                     # arc length at the start of each element
-        _, first_el = np.unique(frame.yarn, return_index=True)
-        ids = np.searchsorted(np.unique(frame.yarn), frame.yarn)
-        tot = np.bincount(ids, weights=L)
-        s_loc = cum + 0.5 * L - cum[first_el[ids]]   # midpoint arc length from the yarn's first element
-        tot = tot[ids]
-        ds = np.abs(s_loc[a] - s_loc[b])
-        ds = np.minimum(ds, tot[a] - ds)
-        near = same & (ds < arc_exclusion * (rc[a] + rc[b]) + 0.5 * (L[a] + L[b]))
-        a, b, qi = a[~near], b[~near], qi[~near]
-    sh = shifts[qi]
-    dist, _, _ = segment_distances(x0[a], d[a], x0[b] + sh, d[b])
-    depth = rc[a] + rc[b] - dist
-    hit = depth > tol
-    a, b, qi, depth = a[hit], b[hit], qi[hit], depth[hit]
-    order = np.argsort(-depth, kind="stable")
-    out = np.zeros(len(order), dtype=[("element_a", np.int64), ("element_b", np.int64),
-                                      ("yarn_a", np.int64), ("yarn_b", np.int64),
-                                      ("depth", float), ("image", np.int64, (k,))])
-    out["element_a"] = a[order]
-    out["element_b"] = b[order]
-    out["yarn_a"] = frame.yarn[a[order]]
-    out["yarn_b"] = frame.yarn[b[order]]
-    out["depth"] = depth[order]
-    if k:
-        out["image"] = imgs[qi[order]]
-    return out
-
-
-def overlap_summary(overlaps: np.ndarray, groups: dict | None = None, yarn_group: dict | None = None) -> str:
-    """One line describing the overlaps (count, deepest, yarns / systems involved)."""
-    if len(overlaps) == 0:
-        return "no overlaps"
-    o = overlaps[0]
-    who = f"yarns {o['yarn_a']} and {o['yarn_b']}"
-    if yarn_group:
-        who += f" ({yarn_group.get(int(o['yarn_a']), '?')} / {yarn_group.get(int(o['yarn_b']), '?')})"
-    return (f"{len(overlaps)} overlapping segment pairs, deepest {o['depth']:.4g} mm between elements "
-            f"{o['element_a']} and {o['element_b']} of {who}")
-
-
-# ----------------------------------------------------------------------------------------
-# the generator
-def _lcm(values):
-    out = 1
-    for v in values:
-        out = out * int(v) // math.gcd(out, int(v))
-    return out
-
-
-def _as_bar(name, spec) -> Bar:
-    if isinstance(spec, Bar):
-        return spec
-    if not isinstance(spec, dict):
-        raise InputError(f"bar {name!r}: expected a table with lapping, yarn, bed, threading; got {spec!r}")
-    known = {"name", "lapping", "yarn", "bed", "threading", "system"}
-    unknown = sorted(set(spec) - known)
-    if unknown:
-        raise InputError(f"bar {name!r}: unknown key(s) {unknown}; known: {sorted(known)}")
-    for key in ("lapping", "yarn"):
-        if key not in spec:
-            raise InputError(f"bar {name!r}: missing key {key!r}")
-    return Bar(name=spec.get("name", name), lapping=spec["lapping"], yarn=spec["yarn"],
-               bed=spec.get("bed", "front"), threading=spec.get("threading", "full"),
-               system=spec.get("system"))
 
 
 @dataclass
@@ -494,6 +141,247 @@ class _YarnPlan:
     role: str  # "ground", "inlay", "pile"
     points: list = field(default_factory=list)     # control points (global, unwrapped)
     nseg: list = field(default_factory=list)       # elements factor per segment (number of sub-segments)
+
+
+@dataclass
+class _Loops:
+    """Control-point templates of the loops in one cell: w, cs wale and course spacing (mm), T
+    thickness (mm), sh shape parameters, levels {"front"/"back": depths} (:func:`layer_levels`)."""
+
+    w: float
+    cs: float
+    T: float
+    sh: dict
+    levels: dict
+
+    def to_global(self, lay, pts):
+        """(x, y, depth) in a layer -> global (x, y, z)."""
+        pts = np.asarray(pts, float)
+        out = pts.copy()
+        if lay == "front":
+            out[:, 2] = self.T - pts[:, 2]
+        else:
+            out[:, 1] = pts[:, 1] + self.sh["back_shift"] * self.cs
+        return out
+
+    def ground(self, lay, needle, side, y0):
+        sh, cs, lv = self.sh, self.cs, self.levels[lay]
+        xn = (needle + 0.5) * self.w
+        hl, hh = sh["loop_half_width"] * self.w, sh["head_half_width"] * self.w
+        f = np.array([
+            [xn + side * hl, y0 + sh["foot"] * cs, lv["foot"]],
+            [xn + side * hl, y0 + sh["leg"] * cs, lv["leg"]],
+            [xn + side * hh, y0 + sh["head"] * cs, lv["head"]],
+            [xn - side * hh, y0 + sh["head"] * cs, lv["head"]],
+            [xn - side * hl, y0 + sh["leg"] * cs, lv["leg"]],
+            [xn - side * hl, y0 + sh["foot"] * cs, lv["foot"]],
+        ])
+        return self.to_global(lay, f)
+
+    def pile(self, lay, needle, side, y0):
+        sh, cs, lv = self.sh, self.cs, self.levels[lay]
+        xn = (needle + 0.5) * self.w
+        hp = sh["pile_half_width"] * self.w
+        y = y0 + sh["pile"] * cs
+        dy = sh["pile_stagger"] * cs
+        f = np.array([
+            [xn + side * hp, y - dy, lv["low"]],
+            [xn + side * hp, y - dy, lv["pile"]],
+            [xn - side * hp, y + dy, lv["pile"]],
+            [xn - side * hp, y + dy, lv["low"]],
+        ])
+        return self.to_global(lay, f)
+
+    def inlay(self, lay, gap, y0):
+        d = self.levels[lay]["inlay"]
+        sh, cs = self.sh, self.cs
+        return self.to_global(lay, [[gap * self.w, y0 + sh["inlay_from"] * cs, d],
+                                    [gap * self.w, y0 + sh["inlay_to"] * cs, d]])
+
+
+def _check_numbers(gauge, courses_per_cm, thickness, elements_per_segment, pile_segments, shape):
+    """Validated (gauge, courses/cm, thickness, elements per segment, pile segments, shape)."""
+    try:
+        gauge = float(gauge)
+        cpc = float(courses_per_cm)
+        T = float(thickness)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"gauge, courses_per_cm and thickness must be numbers: {exc}") from None
+    for nm, v in (("gauge", gauge), ("courses_per_cm", cpc), ("thickness", T)):
+        if not (np.isfinite(v) and v > 0):
+            raise InputError(f"{nm} must be positive and finite, got {v}")
+    eps = int(elements_per_segment)
+    if eps < 1 or eps != elements_per_segment:
+        raise InputError(f"elements_per_segment must be an integer >= 1, got {elements_per_segment}")
+    nleg = int(pile_segments)
+    if nleg < 1 or nleg != pile_segments:
+        raise InputError(f"pile_segments must be an integer >= 1, got {pile_segments}")
+    sh = dict(SHAPE_DEFAULTS)
+    if shape:
+        unknown = sorted(set(shape) - set(SHAPE_DEFAULTS))
+        if unknown:
+            raise InputError(f"shape: unknown key(s) {unknown}; known: {sorted(SHAPE_DEFAULTS)}")
+        sh.update({k: float(v) for k, v in shape.items()})
+    return gauge, cpc, T, eps, nleg, sh
+
+
+def _parse_bars(bars, yarns):
+    """(bars, laps by bar, threading by bar, course repeat C, wale repeat W)."""
+    if isinstance(bars, dict):
+        bar_list = [as_bar(k, v) for k, v in bars.items()]
+    else:
+        bar_list = [as_bar(getattr(b, "name", None) or (b.get("name") if isinstance(b, dict) else f"bar{i}"), b)
+                    for i, b in enumerate(bars)]
+    if not bar_list:
+        raise InputError("a spacer fabric needs at least one guide bar")
+    names = [b.name for b in bar_list]
+    if len(set(names)) != len(names):
+        raise InputError(f"bar names must be unique, got {names}")
+    parsed, threads = {}, {}
+    for b in bar_list:
+        if b.yarn not in yarns:
+            raise InputError(f"bar {b.name!r}: yarn {b.yarn!r} is not defined (known yarns: {sorted(yarns)})")
+        parsed[b.name] = parse_lapping(b.lapping, b.name, b.bed)
+        threads[b.name] = parse_threading(b.threading, b.name)
+    C = lcm(len(v) for v in parsed.values())
+    W = lcm(len(v) for v in threads.values())
+    return bar_list, parsed, threads, C, W
+
+
+def _role(b, parsed):
+    if b.bed == "both":
+        return "pile"
+    pairs = [c.front if b.bed == "front" else c.back for c in parsed[b.name]]
+    return "ground" if any(p[0] != p[1] for p in pairs) else "inlay"
+
+
+def _levels(bar_list, parsed, yarns, clearance):
+    """Depths of the yarn levels of each layer from the largest radius per layer and role."""
+    rmax = {}
+    for b in bar_list:
+        r = yarns[b.yarn].rc
+        role = _role(b, parsed)
+        for lay in (("front", "back") if role == "pile" else (b.bed,)):
+            rmax[(lay, role)] = max(rmax.get((lay, role), 0.0), r)
+    return {lay: layer_levels(rmax.get((lay, "ground"), 0.0), rmax.get((lay, "inlay"), 0.0),
+                              rmax.get((lay, "pile"), 0.0), clearance) for lay in ("front", "back")}
+
+
+def _plans(bar_list, parsed, threads, C, W, loops: _Loops, nleg: int, Ly: float) -> list:
+    """Control points of every yarn: loops, inlays and straight (bowed) pile legs between layers."""
+    sh, cs = loops.sh, loops.cs
+    plans = []
+    for b in bar_list:
+        role = _role(b, parsed)
+        thr = threads[b.name]
+        courses = parsed[b.name] * (C // len(parsed[b.name]))
+        for g in range(W):
+            if not thr[g % len(thr)]:
+                continue
+            plan = _YarnPlan(bar=b, guide=g, courses=courses, role=role)
+            pts, lays = [], []
+            for c, cl in enumerate(courses):
+                y0 = c * cs
+                for lay in ("front", "back"):
+                    pair = getattr(cl, lay)
+                    if pair is None:
+                        continue
+                    a, bb = pair[0] + g, pair[1] + g
+                    if a == bb:
+                        pts.append(loops.inlay(lay, a, y0))
+                    else:
+                        side = 1.0 if a > bb else -1.0
+                        needle = min(a, bb)
+                        pts.append(loops.pile(lay, needle, side, y0) if role == "pile"
+                                   else loops.ground(lay, needle, side, y0))
+                    lays.append(lay)
+            # assemble with straight pile legs between visits of different layers
+            closing = np.array([0.0, Ly, 0.0])
+            allp, nseg = [], []
+            nv = len(pts)
+            for v in range(nv):
+                blk = pts[v]
+                allp.append(blk)
+                nseg.extend([1] * len(blk))
+                if lays[(v + 1) % nv] != lays[v]:
+                    start = blk[-1]
+                    end = pts[(v + 1) % nv][0] + (closing if v == nv - 1 else 0.0)
+                    tt = np.arange(1, nleg)[:, None] / nleg
+                    leg = start + tt * (end - start)
+                    sign = 1.0 if (v % 2 == 0) else -1.0
+                    leg[:, 0] += sign * sh["pile_bow"] * np.linalg.norm(end - start) * np.sin(np.pi * tt[:, 0])
+                    allp.append(leg)
+                    nseg.extend([1] * (nleg - 1))
+            plan.points = np.vstack(allp)
+            plan.nseg = np.array(nseg, dtype=np.int64)
+            plans.append(plan)
+    return plans
+
+
+def _discretise(plans, eps: int, periods, Ly: float):
+    """Nodes, elements, images, yarn id per element and control-point flags of all yarns."""
+    node_blocks, el_blocks, img_blocks, yarn_ids, ctrl_blocks = [], [], [], [], []
+    n0 = 0
+    for yid, plan in enumerate(plans):
+        nper = plan.nseg * eps
+        samples = catmull_rom_periodic(plan.points, np.array([0.0, Ly, 0.0]), nper)
+        wrapped, el, im = wrap_chain(samples, periods, np.array([0, 1]))
+        is_ctrl = np.zeros(len(samples), dtype=bool)
+        is_ctrl[np.cumsum(nper) - nper] = True      # the same points at every resolution
+        ctrl_blocks.append(is_ctrl)
+        node_blocks.append(wrapped)
+        el_blocks.append(el + n0)
+        img_blocks.append(im)
+        yarn_ids.append(np.full(len(el), yid))
+        n0 += len(wrapped)
+    return (np.vstack(node_blocks), np.vstack(el_blocks), np.vstack(img_blocks), np.concatenate(yarn_ids),
+            np.concatenate(ctrl_blocks))
+
+
+def _fit_thickness(nodes, elements, rc_el, T):
+    """Affine map of z (in place) so that the outer yarn surfaces sit at 0 and T exactly."""
+    rc_node = np.zeros(len(nodes))
+    rc_node[elements[:, 0]] = rc_el
+    for _ in range(3):
+        lo = np.argmin(nodes[:, 2] - rc_node)
+        hi = np.argmax(nodes[:, 2] + rc_node)
+        z_lo, z_hi = nodes[lo, 2], nodes[hi, 2]
+        target_lo, target_hi = rc_node[lo], T - rc_node[hi]
+        if target_hi <= target_lo:
+            raise InputError(f"thickness {T} mm is too small for the layers' yarns "
+                             f"(the two layers alone need {z_hi - z_lo + rc_node[lo] + rc_node[hi]:.3g} mm)")
+        alpha = (target_hi - target_lo) / (z_hi - z_lo)
+        nodes[:, 2] = target_lo + alpha * (nodes[:, 2] - z_lo)
+
+
+def _bonds(plans, nodes, elements, yarn, rc_el, is_control, periods, T, levels, bond_distance):
+    """Interlacing bonds: (a, b) node pairs and images from pile / inlay control points inside a
+    layer to the nearest ground-loop control point closer than ``bond_distance`` (bonds join
+    control points only: the interlacings of the knit, the same at every resolution; bonding
+    every node within reach made the cell stiffer with refinement)."""
+    none = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64))
+    if not bond_distance > 0:
+        return none
+    Lx, Ly = periods[0, 0], periods[1, 1]
+    role_y = np.array([p.role for p in plans])
+    node_yarn = np.empty(len(nodes), dtype=np.int64)
+    node_yarn[elements[:, 0]] = yarn
+    zc = 0.5 * T
+    in_layer = np.abs(nodes[:, 2] - zc) > zc - levels["front"]["low"] - 1e-9
+    ground = in_layer & is_control & (role_y[node_yarn] == "ground")
+    other = in_layer & is_control & (role_y[node_yarn] != "ground")
+    gi, oi = np.flatnonzero(ground), np.flatnonzero(other)
+    if not (len(gi) and len(oi)):
+        return none
+    box = np.array([Lx, Ly, 1e6])
+    tree = cKDTree(np.mod(nodes[gi], box), boxsize=box)
+    dist, j = tree.query(np.mod(nodes[oi], box))
+    ok = dist < bond_distance
+    a_n, b_n = oi[ok], gi[j[ok]]
+    diff = nodes[b_n] - nodes[a_n]
+    img = -np.round(diff[:, :2] / np.array([Lx, Ly])).astype(np.int64)
+    keep = np.linalg.norm(diff + img @ periods, axis=1) > 1e-9
+    return a_n[keep], b_n[keep], img[keep]
 
 
 def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, yarns: dict, *,
@@ -527,260 +415,53 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
     yarn_group ({yarn id: system}), layer ((m,) str array "top"/"bottom"/"pile"),
     levels ({"top"/"bottom": depths}), overlaps (structured array), yarn_types (dict).
     """
-    try:
-        gauge = float(gauge)
-        cpc = float(courses_per_cm)
-        T = float(thickness)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"gauge, courses_per_cm and thickness must be numbers: {exc}") from None
-    for nm, v in (("gauge", gauge), ("courses_per_cm", cpc), ("thickness", T)):
-        if not (np.isfinite(v) and v > 0):
-            raise InputError(f"{nm} must be positive and finite, got {v}")
-    eps = int(elements_per_segment)
-    if eps < 1 or eps != elements_per_segment:
-        raise InputError(f"elements_per_segment must be an integer >= 1, got {elements_per_segment}")
-    nleg = int(pile_segments)
-    if nleg < 1 or nleg != pile_segments:
-        raise InputError(f"pile_segments must be an integer >= 1, got {pile_segments}")
-    sh = dict(SHAPE_DEFAULTS)
-    if shape:
-        unknown = sorted(set(shape) - set(SHAPE_DEFAULTS))
-        if unknown:
-            raise InputError(f"shape: unknown key(s) {unknown}; known: {sorted(SHAPE_DEFAULTS)}")
-        sh.update({k: float(v) for k, v in shape.items()})
+    gauge, cpc, T, eps, nleg, sh = _check_numbers(gauge, courses_per_cm, thickness, elements_per_segment,
+                                                  pile_segments, shape)
     w = INCH / gauge
     cs = 10.0 / cpc
-
-    if isinstance(bars, dict):
-        bar_list = [_as_bar(k, v) for k, v in bars.items()]
-    else:
-        bar_list = [_as_bar(getattr(b, "name", None) or (b.get("name") if isinstance(b, dict) else f"bar{i}"), b)
-                    for i, b in enumerate(bars)]
-    if not bar_list:
-        raise InputError("a spacer fabric needs at least one guide bar")
-    names = [b.name for b in bar_list]
-    if len(set(names)) != len(names):
-        raise InputError(f"bar names must be unique, got {names}")
-
-    parsed, threads = {}, {}
-    for b in bar_list:
-        if b.yarn not in yarns:
-            raise InputError(f"bar {b.name!r}: yarn {b.yarn!r} is not defined (known yarns: {sorted(yarns)})")
-        parsed[b.name] = parse_lapping(b.lapping, b.name, b.bed)
-        threads[b.name] = parse_threading(b.threading, b.name)
-    C = _lcm(len(v) for v in parsed.values())
-    W = _lcm(len(v) for v in threads.values())
+    bar_list, parsed, threads, C, W = _parse_bars(bars, yarns)
     Lx, Ly = W * w, C * cs
     periods = np.array([[Lx, 0.0, 0.0], [0.0, Ly, 0.0]])
-
-    def role_of(b):
-        if b.bed == "both":
-            return "pile"
-        courses = parsed[b.name]
-        pairs = [c.front if b.bed == "front" else c.back for c in courses]
-        return "ground" if any(p[0] != p[1] for p in pairs) else "inlay"
-
-    # radii per layer and role -> levels
-    rmax = {}
-    for b in bar_list:
-        r = yarns[b.yarn].rc
-        role = role_of(b)
-        layers = ("front", "back") if role == "pile" else (b.bed,)
-        for lay in layers:
-            key = (lay, role)
-            rmax[key] = max(rmax.get(key, 0.0), r)
-    levels = {}
-    for lay in ("front", "back"):
-        levels[lay] = layer_levels(rmax.get((lay, "ground"), 0.0), rmax.get((lay, "inlay"), 0.0),
-                                   rmax.get((lay, "pile"), 0.0), sh["clearance"])
-
-    def to_global(lay, pts):
-        """(x, y, depth) in a layer -> global (x, y, z)."""
-        pts = np.asarray(pts, float)
-        out = pts.copy()
-        if lay == "front":
-            out[:, 2] = T - pts[:, 2]
-        else:
-            out[:, 1] = pts[:, 1] + sh["back_shift"] * cs
-        return out
-
-    hl, hh, hp = sh["loop_half_width"] * w, sh["head_half_width"] * w, sh["pile_half_width"] * w
-
-    def ground_loop(lay, needle, side, y0):
-        lv = levels[lay]
-        xn = (needle + 0.5) * w
-        f = np.array([
-            [xn + side * hl, y0 + sh["foot"] * cs, lv["foot"]],
-            [xn + side * hl, y0 + sh["leg"] * cs, lv["leg"]],
-            [xn + side * hh, y0 + sh["head"] * cs, lv["head"]],
-            [xn - side * hh, y0 + sh["head"] * cs, lv["head"]],
-            [xn - side * hl, y0 + sh["leg"] * cs, lv["leg"]],
-            [xn - side * hl, y0 + sh["foot"] * cs, lv["foot"]],
-        ])
-        return to_global(lay, f)
-
-    def pile_loop(lay, needle, side, y0):
-        lv = levels[lay]
-        xn = (needle + 0.5) * w
-        y = y0 + sh["pile"] * cs
-        dy = sh["pile_stagger"] * cs
-        f = np.array([
-            [xn + side * hp, y - dy, lv["low"]],
-            [xn + side * hp, y - dy, lv["pile"]],
-            [xn - side * hp, y + dy, lv["pile"]],
-            [xn - side * hp, y + dy, lv["low"]],
-        ])
-        return to_global(lay, f)
-
-    def inlay_point(lay, gap, y0):
-        d = levels[lay]["inlay"]
-        return to_global(lay, [[gap * w, y0 + sh["inlay_from"] * cs, d], [gap * w, y0 + sh["inlay_to"] * cs, d]])
-
-    # ------------------------------------------------------------------ yarn control points
-    plans = []
-    for b in bar_list:
-        role = role_of(b)
-        thr = threads[b.name]
-        courses = parsed[b.name] * (C // len(parsed[b.name]))
-        for g in range(W):
-            if not thr[g % len(thr)]:
-                continue
-            plan = _YarnPlan(bar=b, guide=g, courses=courses, role=role)
-            pts, lays = [], []   # list of (points array, layer)
-            for c, cl in enumerate(courses):
-                y0 = c * cs
-                for lay in ("front", "back"):
-                    pair = getattr(cl, lay)
-                    if pair is None:
-                        continue
-                    a, bb = pair[0] + g, pair[1] + g
-                    if a == bb:
-                        pts.append(inlay_point(lay, a, y0))
-                    else:
-                        side = 1.0 if a > bb else -1.0
-                        needle = min(a, bb)
-                        pts.append(pile_loop(lay, needle, side, y0) if role == "pile"
-                                   else ground_loop(lay, needle, side, y0))
-                    lays.append(lay)
-            # assemble with straight pile legs between visits of different layers
-            closing = np.array([0.0, Ly, 0.0])
-            allp, nseg = [], []
-            nv = len(pts)
-            for v in range(nv):
-                blk = pts[v]
-                nxt_lay = lays[(v + 1) % nv]
-                allp.append(blk)
-                nseg.extend([1] * len(blk))
-                if nxt_lay != lays[v]:
-                    start = blk[-1]
-                    end = pts[(v + 1) % nv][0] + (closing if v == nv - 1 else 0.0)
-                    tt = np.arange(1, nleg)[:, None] / nleg
-                    leg = start + tt * (end - start)
-                    sign = 1.0 if (v % 2 == 0) else -1.0
-                    leg[:, 0] += sign * sh["pile_bow"] * np.linalg.norm(end - start) * np.sin(np.pi * tt[:, 0])
-                    allp.append(leg)
-                    nseg.extend([1] * (nleg - 1))
-            plan.points = np.vstack(allp)
-            plan.nseg = np.array(nseg, dtype=np.int64)
-            plans.append(plan)
-
-    # ------------------------------------------------------------------ discretise
-    node_blocks, el_blocks, img_blocks, yarn_ids, yinfo = [], [], [], [], []
-    ctrl_blocks = []     # True at the control points (the same points at every resolution)
-    n0 = 0
-    for yid, plan in enumerate(plans):
-        nper = plan.nseg * eps
-        samples = catmull_rom_periodic(plan.points, np.array([0.0, Ly, 0.0]), nper)
-        wrapped, el, im = wrap_chain(samples, periods, np.array([0, 1]))
-        is_ctrl = np.zeros(len(samples), dtype=bool)
-        is_ctrl[np.cumsum(nper) - nper] = True
-        ctrl_blocks.append(is_ctrl)
-        node_blocks.append(wrapped)
-        el_blocks.append(el + n0)
-        img_blocks.append(im)
-        yarn_ids.append(np.full(len(el), yid))
-        n0 += len(wrapped)
-    nodes = np.vstack(node_blocks)
-    is_control = np.concatenate(ctrl_blocks)
-    elements = np.vstack(el_blocks)
-    images = np.vstack(img_blocks)
-    yarn = np.concatenate(yarn_ids)
-    ytypes = [yarns[p.bar.yarn] for p in plans]
-    a_el = np.array([ytypes[y].a for y in yarn])
-    b_el = np.array([ytypes[y].b for y in yarn])
-    E_el = np.array([ytypes[y].E for y in yarn])
-    bf_el = np.array([ytypes[y].bending_factor for y in yarn])
-    tf_el = np.array([ytypes[y].torsion_factor for y in yarn])
-    nu_el = np.array([ytypes[y].nu for y in yarn])
-    rc_el = np.array([ytypes[y].rc for y in yarn])
-
-    # respect the thickness exactly: affine map of z so the outer yarn surfaces sit at 0 and T
-    rc_node = np.zeros(len(nodes))
-    rc_node[elements[:, 0]] = rc_el
-    for _ in range(3):
-        lo = np.argmin(nodes[:, 2] - rc_node)
-        hi = np.argmax(nodes[:, 2] + rc_node)
-        z_lo, z_hi = nodes[lo, 2], nodes[hi, 2]
-        target_lo, target_hi = rc_node[lo], T - rc_node[hi]
-        if target_hi <= target_lo:
-            raise InputError(f"thickness {T} mm is too small for the layers' yarns "
-                             f"(the two layers alone need {z_hi - z_lo + rc_node[lo] + rc_node[hi]:.3g} mm)")
-        alpha = (target_hi - target_lo) / (z_hi - z_lo)
-        nodes[:, 2] = target_lo + alpha * (nodes[:, 2] - z_lo)
-
-    # interlacing bonds: short connector beams from pile / inlay nodes inside a layer to the
-    # nearest ground-loop node (frictionless contact alone cannot hold knitted loops together)
+    levels = _levels(bar_list, parsed, yarns, sh["clearance"])
+    plans = _plans(bar_list, parsed, threads, C, W, _Loops(w=w, cs=cs, T=T, sh=sh, levels=levels), nleg, Ly)
+    nodes, elements, images, yarn, is_control = _discretise(plans, eps, periods, Ly)
+    types = [yarns[p.bar.yarn] for p in plans]
+    fields = yarn_fields(types, yarn)
+    _fit_thickness(nodes, elements, fields["contact_radius"], T)
     n_yarn_el = len(elements)
-    frame0 = Frame(nodes, elements, semi_axes=np.column_stack([a_el, b_el]), E=E_el, nu=nu_el, yarn=yarn,
-                   periods=periods, images=images, contact_radius=rc_el,
-                   ref=_reference_vectors(nodes, elements, images @ periods))
-    rc_el_yarn = rc_el.copy()
-    gy_el = np.array([int(np.flatnonzero(yarn == y)[0]) for y in range(len(plans))])
-    bond_mask = np.zeros(0, dtype=bool)
-    if bond_distance > 0:
-        role_y = np.array([p.role for p in plans])
+    frame0 = Frame(nodes, elements, periods=periods, images=images, yarn=yarn,
+                   ref=reference_vectors(nodes, elements, images @ periods),
+                   **{k: v for k, v in fields.items() if k not in ("bending_factor", "torsion_factor")})
+    a_n, b_n, img = _bonds(plans, nodes, elements, yarn, fields["contact_radius"], is_control, periods, T, levels,
+                           bond_distance)
+    if len(a_n):
+        # a bond: the ground yarn's material, its smaller semi-axis as radius, its contact radius
         node_yarn = np.empty(len(nodes), dtype=np.int64)
         node_yarn[elements[:, 0]] = yarn
-        node_r = np.zeros(len(nodes))
-        node_r[elements[:, 0]] = rc_el
-        zc = 0.5 * T
-        in_layer = np.abs(nodes[:, 2] - zc) > zc - levels["front"]["low"] - 1e-9
-        # bonds join control points only: the interlacings of the knit, the same at every
-        # resolution (bonding every node within reach made the cell stiffer with refinement)
-        ground = in_layer & is_control & (role_y[node_yarn] == "ground")
-        other = in_layer & is_control & (role_y[node_yarn] != "ground")
-        gi, oi = np.flatnonzero(ground), np.flatnonzero(other)
-        if len(gi) and len(oi):
-            from scipy.spatial import cKDTree
-            box = np.array([Lx, Ly, 1e6])
-            tree = cKDTree(np.mod(nodes[gi], box), boxsize=box)
-            dist, j = tree.query(np.mod(nodes[oi], box))
-            ok = dist < bond_distance
-            a_n, b_n = oi[ok], gi[j[ok]]
-            if len(a_n):
-                diff = nodes[b_n] - nodes[a_n]
-                img = -np.round(diff[:, :2] / np.array([Lx, Ly])).astype(np.int64)
-                L_b = np.linalg.norm(diff + img @ periods, axis=1)
-                keep = L_b > 1e-9
-                a_n, b_n, img = a_n[keep], b_n[keep], img[keep]
-                gy = node_yarn[b_n]
-                elements = np.vstack([elements, np.column_stack([a_n, b_n])])
-                images = np.vstack([images, img])
-                yarn = np.concatenate([yarn, node_yarn[b_n]])
-                rb = np.minimum(a_el[gy], b_el[gy])
-                a_el = np.concatenate([a_el, rb])
-                b_el = np.concatenate([b_el, rb])
-                E_el = np.concatenate([E_el, np.array([ytypes[y].E for y in gy])])
-                bf_el = np.concatenate([bf_el, np.array([ytypes[y].bending_factor for y in gy])])
-                tf_el = np.concatenate([tf_el, np.array([ytypes[y].torsion_factor for y in gy])])
-                nu_el = np.concatenate([nu_el, np.array([ytypes[y].nu for y in gy])])
-                rc_el = np.concatenate([rc_el, rc_el_yarn[gy_el[gy]]])
-        bond_mask = np.arange(len(elements)) >= n_yarn_el
-    frame = Frame(nodes, elements, semi_axes=np.column_stack([a_el, b_el]), E=E_el, nu=nu_el, yarn=yarn,
-                  periods=periods, images=images, contact_radius=rc_el, bending_factor=bf_el,
-                  torsion_factor=tf_el,
-                  ref=_reference_vectors(nodes, elements, images @ periods))
+        gy = node_yarn[b_n]
+        bond = yarn_fields(types, gy)
+        rb = bond["semi_axes"].min(axis=1)
+        bond["semi_axes"] = np.column_stack([rb, rb])
+        elements = np.vstack([elements, np.column_stack([a_n, b_n])])
+        images = np.vstack([images, img])
+        yarn = np.concatenate([yarn, gy])
+        fields = {k: np.concatenate([fields[k], bond[k]]) for k in fields}
+    frame = Frame(nodes, elements, periods=periods, images=images, yarn=yarn,
+                  ref=reference_vectors(nodes, elements, images @ periods), **fields)
+    info = _info(plans, bar_list, yarns, frame, elements, yarn, n_yarn_el, T, w, cs, W, C, periods, levels, eps,
+                 nleg, sh)
+    if check_overlaps:
+        ov = yarn_overlaps(frame0)
+        info["overlaps"] = ov
+        if len(ov):
+            warnings.warn(f"spacer fabric: {overlap_summary(ov, yarn_group=info['yarn_group'])} at creation "
+                          f"(left for the contact solver to relax)", stacklevel=2)
+    return frame, info
 
+
+def _info(plans, bar_list, yarns, frame, elements, yarn, n_yarn_el, T, w, cs, W, C, periods, levels, eps, nleg,
+          sh) -> dict:
+    """The generator's info: element groups per yarn system (and bonds), layers, geometry."""
     groups = {}
     is_bond = np.zeros(len(elements), dtype=bool)
     is_bond[n_yarn_el:] = True
@@ -793,7 +474,7 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
     layer_of = {"front": "top", "back": "bottom", "both": "pile"}
     layer = np.array([layer_of[plans[y].bar.bed] for y in yarn])
     layer[is_bond] = np.where(frame.nodes[elements[is_bond, 0], 2] > 0.5 * T, "top", "bottom")
-    info = {
+    return {
         "generator": "spacer",
         "groups": groups,
         "thickness": T,
@@ -815,23 +496,6 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
         "shape": sh,
         "n_bonds": int(is_bond.sum()),
     }
-    if check_overlaps:
-        ov = yarn_overlaps(frame0)
-        info["overlaps"] = ov
-        if len(ov):
-            warnings.warn(f"spacer fabric: {overlap_summary(ov, yarn_group=info['yarn_group'])} at creation "
-                          f"(left for the contact solver to relax)", stacklevel=2)
-    return frame, info
-
-
-def _reference_vectors(nodes, elements, shift):
-    """Per-element reference vector: global z, or global x for elements within ~25 degrees of z."""
-    d = nodes[elements[:, 1]] + shift - nodes[elements[:, 0]]
-    e1 = d / np.linalg.norm(d, axis=1)[:, None]
-    ref = np.zeros_like(d)
-    ref[:, 2] = 1.0
-    ref[np.abs(e1[:, 2]) > 0.9] = (1.0, 0.0, 0.0)
-    return ref
 
 
 def build_cell(parameters: dict, yarns: dict[str, YarnType], resolution: dict) -> tuple[Frame, dict]:

@@ -23,7 +23,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit, prange
 
-from ..errors import SolverError
+from ..config import option
+from ..errors import InputError, SolverError
 
 try:  # optional, fast sparse Cholesky
     from sksparse.cholmod import cholesky as _cholmod  # type: ignore
@@ -54,30 +55,6 @@ class SolveReport:
 
     def as_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if k != "history"}
-
-
-def rigid_body_modes(coords: np.ndarray, center=None) -> np.ndarray:
-    """Near-null space of a beam frame: (6n, 6) translations and rotations.
-
-    Rotation about axis k: translation u = e_k x (x - x0), rotation theta = e_k.
-    Coordinates are centred and scaled to unit size so the columns are balanced.
-    """
-    x = np.asarray(coords, dtype=float)
-    x0 = x.mean(axis=0) if center is None else np.asarray(center)
-    d = x - x0
-    s = max(float(np.abs(d).max()), 1e-300)
-    d = d / s
-    n = len(x)
-    B = np.zeros((n, 6, 6))
-    for k in range(3):
-        B[:, k, k] = 1.0
-    # omega = e_x: u = (0, -z, y); e_y: (z, 0, -x); e_z: (-y, x, 0)
-    B[:, 1, 3], B[:, 2, 3] = -d[:, 2], d[:, 1]
-    B[:, 0, 4], B[:, 2, 4] = d[:, 2], -d[:, 0]
-    B[:, 0, 5], B[:, 1, 5] = -d[:, 1], d[:, 0]
-    for k in range(3):
-        B[:, 3 + k, 3 + k] = 1.0 / s   # theta = omega, consistent with the scaled lever arm
-    return B.reshape(6 * n, 6)
 
 
 @njit(cache=True, parallel=True)
@@ -231,14 +208,13 @@ class LinearSolver:
     maxiter : CG iteration limit (default 1000 for amg, 5000 for cg)
     """
 
-    def __init__(self, A, *, method: str = "amg", B=None, tol: float = 1e-10,
+    def __init__(self, A, *, method: str = "amg", B=None, tol: float | None = None,
                  maxiter: int | None = None, hierarchy=None):
         if method not in METHODS:
-            from ..errors import InputError
             raise InputError(f"solver must be one of {METHODS}, got {method!r}")
         self.A = A
         self.method = method
-        self.tol = float(tol)
+        self.tol = float(option("tol", tol))
         self.maxiter = maxiter or (1000 if method == "amg" else 5000)
         self.ndof = A.shape[0]
         self.operator_complexity = 1.0
@@ -342,6 +318,6 @@ def convergence_error(rep: SolveReport, tol: float, label: str) -> SolverError:
     return SolverError(msg, history=h, report=rep)
 
 
-def solve(A, b, *, method="amg", B=None, tol=1e-10, maxiter=None):
+def solve(A, b, *, method="amg", B=None, tol=None, maxiter=None):
     """One-shot solve: returns (x, report)."""
     return LinearSolver(A, method=method, B=B, tol=tol, maxiter=maxiter).solve(b)

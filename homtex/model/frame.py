@@ -15,6 +15,13 @@ from ..errors import InputError
 from .sections import section_properties
 
 
+#: per-element constructor arguments of a Frame, in the order :meth:`Frame.element_fields` returns them
+ELEMENT_FIELDS = ("semi_axes", "E", "nu", "yarn", "ref", "contact_radius", "prestrain", "bending_factor",
+                  "torsion_factor")
+#: defaults of the fields that have one (used when frames are joined, :func:`stack_fields`)
+FIELD_DEFAULTS = {"prestrain": 0.0, "bending_factor": 1.0, "torsion_factor": 1.0}
+
+
 def _per_element(value, m, name, dtype=float):
     """Broadcast a scalar or (m,) array to a contiguous (m,) array, naming ``name`` on failure."""
     if value is None:
@@ -260,23 +267,67 @@ class Frame:
 
     @cached_property
     def EA(self):
+        """(m,) axial stiffness E A, N."""
         return self.E * self.A
+
+    @cached_property
+    def node_radius(self) -> np.ndarray:
+        """(n,) largest contact radius of the elements at each node, mm (node-plate gaps use it)."""
+        r = np.zeros(self.n_nodes)
+        np.maximum.at(r, self.elements[:, 0], self.contact_radius)
+        np.maximum.at(r, self.elements[:, 1], self.contact_radius)
+        return r
 
     def yarn_ids(self):
         return np.unique(self.yarn)
 
+    # ------------------------------------------------------------------ the one copy path
+    def element_fields(self, select=None) -> dict:
+        """The per-element constructor arguments of this frame ({name: (m, ...) array}).
+
+        ``select``: element indices or a bool mask; an index array may repeat elements (tiling).
+        Every copy of a frame (``with_``, tiling, periodising, joining with a stitch) goes
+        through here, so a new per-element field is added in :data:`ELEMENT_FIELDS` and here only.
+        """
+        d = {"semi_axes": np.column_stack([self.a, self.b]), "E": self.E, "nu": self.nu, "yarn": self.yarn,
+             "ref": self.R[:, 1], "contact_radius": self.contact_radius, "prestrain": self.prestrain,
+             "bending_factor": self.bending_factor, "torsion_factor": self.torsion_factor}
+        assert tuple(d) == ELEMENT_FIELDS
+        if select is not None:
+            d = {k: v[select] for k, v in d.items()}
+        return {k: np.ascontiguousarray(v) for k, v in d.items()}
+
     def with_(self, **changes) -> "Frame":
         """A copy with some constructor arguments replaced (e.g. ``prestrain=...``)."""
-        kw = dict(nodes=self.nodes, elements=self.elements, semi_axes=np.column_stack([self.a, self.b]),
-                  E=self.E, nu=self.nu, yarn=self.yarn, ref=self.R[:, 1], periods=self.periods,
-                  images=self.images, contact_radius=self.contact_radius, prestrain=self.prestrain,
-                  bending_factor=self.bending_factor, torsion_factor=self.torsion_factor)
+        kw = dict(nodes=self.nodes, elements=self.elements, periods=self.periods, images=self.images,
+                  **self.element_fields())
         kw.update(changes)
         if "radius" in changes:
             kw.pop("semi_axes")
         return Frame(**kw)
 
+    replace = with_
+
     def __repr__(self) -> str:
         per = f", {self.dim_periodic}-periodic" if self.dim_periodic else ""
         return (f"Frame({self.n_nodes} nodes, {self.n_elements} elements, "
                 f"{len(self.yarn_ids())} yarns{per})")
+
+
+def stack_fields(*parts: dict) -> dict:
+    """Per-element fields of frames joined one after another ({name: array}); a field missing
+    from a part takes the Frame default for that part's elements (zero pre-strain, factors 1).
+    Fields without a default (section, E, nu, yarn, reference vector) must be in every part."""
+    sizes = [len(next(iter(p.values()))) for p in parts]
+    out = {}
+    for name in ELEMENT_FIELDS:
+        cols = []
+        for p, m in zip(parts, sizes):
+            if name in p:
+                cols.append(np.asarray(p[name]))
+            elif name in FIELD_DEFAULTS:
+                cols.append(np.full(m, FIELD_DEFAULTS[name]))
+            else:
+                raise InputError(f"stack_fields: field {name!r} is missing from a part (no default)")
+        out[name] = np.concatenate(cols)
+    return out

@@ -1,22 +1,28 @@
-"""Supports and loads, and the check that every part of a structure is held.
+"""The scene of a solve: supports, loads, rigid plates and pins, described once.
 
 ``fixed``: dict node -> "all" | list of DOF indices 0..5 (held at zero) |
 dict {DOF index: prescribed value}. ``loads``: dict node -> 6 numbers
-(Fx, Fy, Fz, Mx, My, Mz) in N and N mm.
+(Fx, Fy, Fz, Mx, My, Mz) in N and N mm. Plates are rigid planes normal to z that the
+yarns cannot cross (:class:`Plate`). :class:`Scene` bundles them for one frame and is what
+every solve consumes; :func:`default_pins` and :func:`periodic_pins` are the two ways homtex
+removes the rigid motions that nothing else holds.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
-from ..errors import InputError, SolverError
+from ..errors import InputError
+from .topology import check_held, components
+
+__all__ = ["DOF_NAMES", "Plate", "Scene", "default_pins", "parse_fixed", "parse_loads", "periodic_pins"]
 
 DOF_NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
-MOTION_NAMES = ("translation x", "translation y", "translation z",
-                "rotation about x", "rotation about y", "rotation about z")
 
 
 def _node_index(node, n):
@@ -85,149 +91,145 @@ def parse_loads(loads, n_nodes: int) -> np.ndarray:
     return f
 
 
-@njit(cache=True)
-def _components(n, node_ptr, nbr, nbr_img, k):
-    """Connected components by BFS, with each node's lattice image tau (n, k)."""
-    label = np.full(n, -1, dtype=np.int64)
-    tau = np.zeros((n, k), dtype=np.int64)
-    queue = np.empty(n, dtype=np.int64)
-    c = 0
-    for s in range(n):
-        if label[s] >= 0:
-            continue
-        label[s] = c
-        head = 0
-        tail = 0
-        queue[tail] = s
-        tail += 1
-        while head < tail:
-            a = queue[head]
-            head += 1
-            for p in range(node_ptr[a], node_ptr[a + 1]):
-                b = nbr[p]
-                if label[b] < 0:
-                    label[b] = c
-                    for q in range(k):
-                        tau[b, q] = tau[a, q] + nbr_img[p, q]
-                    queue[tail] = b
-                    tail += 1
-        c += 1
-    return label, tau
 
 
-def components(n_nodes, edges, edge_images):
-    """Component label (n,) and lattice image tau (n, k) of every node.
+@dataclass
+class Plate:
+    """A rigid, frictionless plane z = ``z`` (mm) that the yarns cannot cross.
 
-    ``edges`` (p, 2) joins node i to node j shifted by ``edge_images`` (p, k).
+    Parameters
+    ----------
+    z : height of the plane, mm.
+    normal : +1 when the yarns lie above the plate (a bottom plate), -1 when below (a top plate).
+    displacement : prescribed motion of the plate along z, mm (default 0: fixed).
+    force : force (N) pressing the plate against the yarns (force control; its
+        motion is then an unknown).
+    pressure, area : alternatively a pressure (kPa) on an area (mm^2): force = pressure * area * 1e-3.
     """
-    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    img = np.asarray(edge_images, dtype=np.int64).reshape(len(edges), -1)
-    k = img.shape[1]
-    src = np.concatenate([edges[:, 0], edges[:, 1]])
-    dst = np.concatenate([edges[:, 1], edges[:, 0]])
-    dimg = np.concatenate([img, -img])
-    order = np.argsort(src, kind="stable")
-    ptr = np.zeros(n_nodes + 1, dtype=np.int64)
-    np.cumsum(np.bincount(src, minlength=n_nodes), out=ptr[1:])
-    return _components(n_nodes, ptr, np.ascontiguousarray(dst[order]),
-                       np.ascontiguousarray(dimg[order]), k)
+
+    z: float
+    normal: int = 1
+    displacement: float | None = None
+    force: float | None = None
+    pressure: float | None = None
+    area: float | None = None
+    name: str = ""
+
+    def __post_init__(self):
+        if self.normal not in (1, -1):
+            raise InputError(f"Plate.normal must be +1 (yarns above) or -1 (yarns below), got {self.normal!r}")
+        if not np.isfinite(float(self.z)):
+            raise InputError(f"Plate.z must be finite, got {self.z!r}")
+        if self.pressure is not None:
+            if self.force is not None:
+                raise InputError("Plate: give either 'force' or 'pressure' (with 'area'), not both")
+            if self.area is None or not (float(self.area) > 0):
+                raise InputError("Plate.pressure needs a positive 'area' (mm^2)")
+            self.force = float(self.pressure) * float(self.area) * 1e-3
+        if self.force is not None and self.displacement is not None:
+            raise InputError("Plate: give either 'displacement' (displacement control) or 'force' "
+                             "(force control), not both")
+        for name in ("displacement", "force"):
+            v = getattr(self, name)
+            if v is not None and not np.isfinite(float(v)):
+                raise InputError(f"Plate.{name} must be finite, got {v!r}")
+
+    @property
+    def force_controlled(self) -> bool:
+        return self.force is not None
 
 
-def _ranges(idx) -> str:
-    idx = np.sort(np.asarray(idx))
-    if idx.size == 0:
-        return ""
-    breaks = np.flatnonzero(np.diff(idx) != 1)
-    starts = np.concatenate([[idx[0]], idx[breaks + 1]])
-    ends = np.concatenate([idx[breaks], [idx[-1]]])
-    parts = [f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts, ends)]
-    if len(parts) > 6:
-        parts = parts[:6] + [f"... ({len(idx)} nodes)"]
-    return ", ".join(parts)
+@dataclass
+class Scene:
+    """Supports, loads and plates of one frame.
 
-
-def unheld_parts(frame, mask, extra_edges=None, extra_images=None, tol=1e-10):
-    """Parts of the structure that the constraints do not hold.
-
-    A part (connected component over elements and ``extra_edges``, e.g. active
-    contacts) is held when its constrained DOFs remove every rigid motion that
-    periodicity allows it. Returns a list of dicts with ``nodes``, ``yarns`` and
-    ``free`` (names of the free rigid motions); empty when all is held.
+    Attributes
+    ----------
+    frame : the Frame.
+    mask : (6n,) bool, DOFs held by supports; values : (6n,) their prescribed values (mm, rad).
+    loads : (6n,) applied nodal loads (N, N mm), pre-strain loads not included.
+    plates : rigid plates (each an extra node n + p of the contact solve whose only free DOF,
+        under force control, is uz).
+    fixed : the supports as given (dict), for reports.
     """
+
+    frame: object
+    mask: np.ndarray
+    values: np.ndarray
+    loads: np.ndarray
+    plates: list = field(default_factory=list)
+    fixed: dict = field(default_factory=dict)
+
+    @classmethod
+    def build(cls, frame, fixed=None, loads=None, plates=()) -> "Scene":
+        """Parse supports, loads and plates for ``frame`` (InputError names the culprit)."""
+        n = frame.n_nodes
+        mask, values = parse_fixed(fixed, n)
+        plates = list(plates or [])
+        for i, p in enumerate(plates):
+            if not isinstance(p, Plate):
+                raise InputError(f"plates[{i}] must be a homtex.Plate, got {type(p).__name__}")
+        return cls(frame=frame, mask=mask, values=values, loads=parse_loads(loads, n), plates=plates,
+                   fixed=dict(fixed or {}))
+
+    def check_held(self, extra_edges=None, extra_images=None, mask=None) -> None:
+        """SolverError naming every part that the supports (and ``extra_edges``) do not hold."""
+        check_held(self.frame, self.mask if mask is None else mask, extra_edges, extra_images)
+
+
+def default_pins(frame, x=None) -> dict:
+    """Pin the rigid motions that frictionless plates and contacts leave free, per connected part.
+
+    For every connected part (yarn or group of joined yarns): ux, uy of its lowest node; if the
+    part is straight, also the spin about its axis (rotation DOF nearest to the axis; exact
+    for axis-aligned yarns); if it does not wrap around a period (finite part), the in-plane DOF
+    of its node farthest from the lowest one (rotation about z). Frictionless normal contacts
+    carry no load along these motions, so the pins' reactions stay zero in a well-posed problem.
+    ``x`` (n, 3): node positions to judge "lowest" and "farthest" (default the frame's nodes).
+    Returns a ``fixed`` dict.
+    """
+    x = frame.nodes if x is None else x
     n = frame.n_nodes
-    k = frame.dim_periodic
-    edges = frame.elements
-    imgs = frame.images
-    if extra_edges is not None and len(extra_edges):
-        edges = np.vstack([edges, np.asarray(extra_edges, dtype=np.int64).reshape(-1, 2)])
-        ei = (np.zeros((len(extra_edges), k), dtype=np.int64) if extra_images is None
-              else np.asarray(extra_images, dtype=np.int64).reshape(len(extra_edges), k))
-        imgs = np.vstack([imgs, ei])
-    label, tau = components(n, edges, imgs)
-    ncomp = int(label.max()) + 1
-    x = frame.nodes + (tau @ frame.periods if k else 0.0)
-    # cycle images: lattice vectors along which a part wraps (it cannot rotate about others)
-    wraps = np.zeros((ncomp, 3, 3))
-    if k:
-        c = tau[edges[:, 0]] + imgs - tau[edges[:, 1]]
-        w = c @ frame.periods
-        nz = np.any(c != 0, axis=1)
-        if nz.any():
-            wn = w[nz] / np.linalg.norm(w[nz], axis=1)[:, None]
-            np.add.at(wraps, label[edges[nz, 0]], np.eye(3)[None] - wn[:, :, None] * wn[:, None, :])
-    centers = np.zeros((ncomp, 3))
-    np.add.at(centers, label, x)
-    centers /= np.bincount(label, minlength=ncomp)[:, None]
-    d = x - centers[label]
-    size = np.zeros(ncomp)
-    np.maximum.at(size, label, np.abs(d).max(axis=1))
-    d /= np.maximum(size[label], 1e-300)[:, None]
-    B = np.zeros((n, 6, 6))
-    for q in range(3):
-        B[:, q, q] = 1.0
-        B[:, 3 + q, 3 + q] = 1.0
-    B[:, 1, 3], B[:, 2, 3] = -d[:, 2], d[:, 1]
-    B[:, 0, 4], B[:, 2, 4] = d[:, 2], -d[:, 0]
-    B[:, 0, 5], B[:, 1, 5] = -d[:, 1], d[:, 0]
-    rows = B.reshape(6 * n, 6)[mask]
-    owner = label[np.flatnonzero(mask) // 6]
-    G = np.zeros((ncomp, 6, 6))
-    np.add.at(G, owner, rows[:, :, None] * rows[:, None, :])
-    out = []
+    el = frame.elements
+    g = coo_matrix((np.ones(len(el)), (el[:, 0], el[:, 1])), shape=(n, n))
+    ncomp, label = connected_components(g, directed=False)
+    elab = label[el[:, 0]]
+    fixed = {}
+    e1 = frame.R[:, 0]
     for comp in range(ncomp):
-        # allowed rotations: null space of sum (I - w w^T) over wrap directions
-        if k and np.any(wraps[comp]):
-            ew, ev = np.linalg.eigh(wraps[comp])
-            rot = ev[:, ew < 1e-9 * max(ew.max(), 1.0)]
-        else:
-            rot = np.eye(3)
-        Q = np.zeros((6, 3 + rot.shape[1]))
-        Q[:3, :3] = np.eye(3)
-        Q[3:, 3:] = rot
-        Gc = Q.T @ G[comp] @ Q
-        ew, ev = np.linalg.eigh(Gc)
-        free = ev[:, ew < tol]
-        if free.shape[1] == 0:
-            continue
-        motions = Q @ free
-        names = [MOTION_NAMES[i] for i in range(6) if np.abs(motions[i]).max() > 1e-6]
         nodes = np.flatnonzero(label == comp)
-        in_comp = label[frame.elements[:, 0]] == comp
-        out.append({"nodes": nodes, "yarns": np.unique(frame.yarn[in_comp]).tolist(),
-                    "free": names, "elements": np.flatnonzero(in_comp)})
-    return out
+        a = int(nodes[np.argmin(x[nodes, 2])])
+        dofs = [0, 1]
+        ec = np.flatnonzero(elab == comp)
+        if len(ec):
+            ax = e1[ec[0]]
+            if np.all(np.linalg.norm(np.cross(e1[ec], ax), axis=1) < 1e-9):
+                dofs.append(3 + int(np.argmax(np.abs(ax))))
+        fixed[a] = dofs
+        wraps = frame.dim_periodic and len(ec) and np.any(frame.images[ec] != 0)
+        if not wraps and len(nodes) > 1:
+            dxy = x[nodes, :2] - x[a, :2]
+            q = int(np.argmax(np.einsum("ij,ij->i", dxy, dxy)))
+            b = int(nodes[q])
+            if b != a and np.linalg.norm(dxy[q]) > 0:
+                fixed[b] = [1] if abs(dxy[q, 0]) >= abs(dxy[q, 1]) else [0]
+    return fixed
 
 
-def check_held(frame, mask, extra_edges=None, extra_images=None):
-    """Raise SolverError naming every part of the structure that nothing holds."""
-    parts = unheld_parts(frame, mask, extra_edges, extra_images)
-    if not parts:
-        return
-    lines = []
-    for p in parts[:10]:
-        lines.append(f"  yarn(s) {p['yarns']} (nodes {_ranges(p['nodes'])}) is free to move: "
-                     f"{', '.join(p['free'])}")
-    more = f"\n  ... and {len(parts) - 10} more parts" if len(parts) > 10 else ""
-    raise SolverError(f"{len(parts)} part(s) of the structure are held by nothing "
-                      f"(singular stiffness):\n" + "\n".join(lines) + more +
-                      "\nAdd supports (or contacts) that hold them.")
+def periodic_pins(frame) -> np.ndarray:
+    """(6n,) bool mask pinning the translations of one node per connected part of a periodic
+    frame (and, for k = 1 along a coordinate axis, the rotation about that axis): what
+    periodic fluctuations leave free. SolverError if a part is still free."""
+    n = frame.n_nodes
+    label, _ = components(n, frame.elements, frame.images)
+    _, first = np.unique(label, return_index=True)
+    mask = np.zeros((n, 6), dtype=bool)
+    mask[first, :3] = True
+    if frame.dim_periodic == 1:
+        t = np.abs(frame.periods[0]) / np.linalg.norm(frame.periods[0])
+        ax = int(np.argmax(t))
+        if t[ax] > 1 - 1e-12:
+            mask[first, 3 + ax] = True
+    mask = mask.ravel()
+    check_held(frame, mask)
+    return mask

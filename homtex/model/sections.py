@@ -98,3 +98,19 @@ class YarnType:
         if self.contact_radius is not None:
             return float(self.contact_radius)
         return max(self.a, self.b)
+
+
+def yarn_fields(types, which) -> dict:
+    """Per-element :class:`~homtex.Frame` arguments of elements made of yarn types:
+    element e is made of ``types[which[e]]``. Returns {semi_axes (m, 2), E, nu, contact_radius,
+    bending_factor, torsion_factor (m,)} (mm, MPa, 1)."""
+    which = np.asarray(which, dtype=np.int64)
+    table = {
+        "semi_axes": np.array([[t.a, t.b] for t in types], dtype=float).reshape(-1, 2),
+        "E": np.array([t.E for t in types], dtype=float),
+        "nu": np.array([t.nu for t in types], dtype=float),
+        "contact_radius": np.array([t.rc for t in types], dtype=float),
+        "bending_factor": np.array([t.bending_factor for t in types], dtype=float),
+        "torsion_factor": np.array([t.torsion_factor for t in types], dtype=float),
+    }
+    return {k: np.ascontiguousarray(v[which]) for k, v in table.items()}

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_netcdf", "read_netcdf", "sanitize_attrs", "set_meta", "check_meta"]
+__all__ = ["read_netcdf", "sanitize_attrs", "write_netcdf"]
 
 
 def _attr_value(v):
@@ -47,19 +47,6 @@ def _attr_value(v):
 def sanitize_attrs(attrs: dict) -> dict:
     """A copy of ``attrs`` that netCDF4 can store (bools/None/dicts/lists -> strings)."""
     return {str(k): _attr_value(v) for k, v in attrs.items()}
-
-
-def set_meta(da, units: str, long_name: str):
-    """Set ``units`` and ``long_name`` on a DataArray / Variable (returned for chaining)."""
-    da.attrs["units"] = units
-    da.attrs["long_name"] = long_name
-    return da
-
-
-def check_meta(ds) -> list:
-    """Names of data variables and coordinates of ``ds`` lacking ``units`` or ``long_name``."""
-    return [str(n) for n in [*ds.data_vars, *ds.coords]
-            if "units" not in ds[n].attrs or "long_name" not in ds[n].attrs]
 
 
 def write_netcdf(ds, path) -> Path:

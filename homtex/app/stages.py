@@ -1,19 +1,29 @@
-"""End-to-end jobs behind the ``homtex`` command (each writes netCDF + PNG).
-
-``main_job`` is what README's first command runs. Each stage is a function that takes an
-output folder and returns the paths it wrote, so the CLI, the tests and the studies share them.
+"""The stages of the main job, each a function that computes, writes netCDF + PNG into an
+output folder and returns what it wrote (the command line, the tests and the studies share them).
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 import xarray as xr
 
-from .. import __version__
+from .._version import __version__
+from ..api import compress, solve_static
+from ..contact.compress import compression_summary
+from ..contact.options import Contact
 from ..errors import InputError
+from ..geometry.lattices import lattice_frame
+from ..lookup import Lookup
+from ..macro import macro_curve
+from ..output.io import write_netcdf
+from ..seams import seam_compression, seam_profile
+
+log = logging.getLogger(__name__)
 
 
 def _attrs(ds: xr.Dataset, **extra) -> xr.Dataset:
@@ -22,18 +32,11 @@ def _attrs(ds: xr.Dataset, **extra) -> xr.Dataset:
 
 
 def _save(ds: xr.Dataset, path: Path) -> Path:
-    try:
-        from ..output.io import write_netcdf
-    except ImportError:  # io.py lands with the studies issue
-        ds.to_netcdf(path, engine="netcdf4")
-    else:
-        write_netcdf(ds, path)
-    return path
+    return write_netcdf(ds, path)
 
 
 def _plt():
-    import matplotlib
-
+    """matplotlib.pyplot on the file-only Agg backend (no screen needed)."""
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -47,8 +50,6 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
     Solved with every solver; writes the per-node displacement, per-element axial force and
     energy, and the solver reports. Returns {name: path}.
     """
-    from ..geometry.lattices import lattice_frame
-    from ..analysis.static import solve_static
 
     f = lattice_frame("octet", radius=radius, E=2000.0, nu=0.35, repeat=repeat, periodic=False,
                       elements_per_strut=elements_per_strut)
@@ -128,8 +129,6 @@ def _timed(fn, *args, **kw):
 def unseamed_stage(cell, out: Path, *, strain=0.5, steps=25, progress=False) -> tuple:
     """Yarn-level compression of the unseamed cell between plates: curve, modulus, DIN-style
     stresses, energy by yarn system. Returns (curve Dataset, summary dict, {name: path})."""
-    from ..contact import compress
-    from ..seams import compression_summary
 
     curve, sec = _timed(compress, cell, strain=strain, steps=steps, progress=progress)
     if curve.sizes["strain"] == 0:
@@ -173,7 +172,6 @@ def cushion_stage(cell, out: Path, *, distances=(18.0, 24.0, 43.0), low_prestrai
 
     Returns ({method: {(d, eps0 or None): profile}}, table rows, {name: path}).
     """
-    from ..seams import seam_profile
 
     methods = ("yarn", "foundation")
     profiles = {m: {} for m in methods}
@@ -253,7 +251,6 @@ def macro_stage(cell, curve, profiles, out: Path, *, distances=(18.0, 24.0, 43.0
                 strain=0.5, seed=0) -> tuple:
     """Macro cushion-layer curves under the 121 cm^2 plate: no seams and each seam distance.
     Returns (Dataset, {name: path})."""
-    from ..macro import macro_curve
 
     cases = [None, *distances]
     curves, secs = [], []
@@ -307,8 +304,6 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
     """Yarn-level compression of the seam cell (paper's Fig. 11) against the macro layer on
     the same specimen (identical cushions, no scatter): force error up to ``strain`` and the
     run-time ratio, measured in this run. Returns (Dataset, summary dict, {name: path})."""
-    from ..macro import macro_curve
-    from ..seams import seam_compression
 
     H0 = float(cell.info["thickness"])
     d = float(seam_distance)
@@ -406,9 +401,6 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
     Errors of 0 (the references) are drawn at 1e-6.
     Returns (Dataset, {name: path}).
     """
-    from ..contact import Contact, compress
-    from ..macro import macro_curve
-    from ..seams import seam_compression
 
     rows = []   # (question, label, seconds, error)
     # A: unseamed
@@ -424,7 +416,6 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
         ds, sec = _timed(compress, cell, strain=0.2, steps=4, contact=Contact(gap_tol=gtol))
         rows.append(("A unseamed to 20 %", f"yarn, gap tol {gtol:g} mm", sec,
                      _curve_error(rx, ry, ds.strain.values, ds.stress.values, 0.2)))
-    from ..lookup import Lookup
 
     lk, sec_fit = _timed(Lookup.from_dataset, curve, "stress")
     e = rx[rx > 0]
@@ -478,226 +469,5 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
 
 
 # ----------------------------------------------------------------------------- main job
-def main_job(out: Path, *, quick: bool = False) -> dict:
-    """The README's main job: the paper's study end to end. Returns {description: path}.
-
-    Stages: lattice demo (solver check) -> spacer cell picture -> unseamed yarn-level
-    compression -> cushion heights and profiles (18, 24, 43 mm; 15 % pre-strain) -> macro
-    curves -> yarn-level seamed compression against the macro layer -> speed-accuracy chart;
-    summary.md collects the tables.
-    """
-    from ..cells import load_cell
-    from ..output.plot import plot_cell
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    outputs = {}
-    t0 = time.perf_counter()
-
-    def stage(msg):
-        print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", flush=True)
-
-    outputs.update(lattice_demo(out, repeat=(3, 3, 3) if quick else (6, 6, 6)))
-    stage("lattice demo (amg, direct, cg on the same octet block) done")
-    cell = load_cell(SPACER_CELL)
-    outputs["spacer cell (picture)"] = plot_cell(cell, out / "spacer_cell.png")
-    # 50 load steps to 50 %: step-converged (contact is re-linearised per step; 25 steps are up to 5 %
-    # off around 24 %, where new contacts form; 50 steps 1.2 %, 100 and 200 steps agree)
-    curve, summ, paths = unseamed_stage(cell, out, strain=0.5, steps=50)
-    outputs.update(paths)
-    stage(f"unseamed compression: {curve.sizes['strain']} steps, status {curve.attrs['status']}")
-    profiles, rows, paths = cushion_stage(cell, out)
-    outputs.update(paths)
-    stage("cushion profiles done")
-    # the macro curves use the fitted (foundation) cushions, which reproduce the measured heights
-    macro, paths = macro_stage(cell, curve, profiles["foundation"], out, strain=0.5)
-    outputs.update(paths)
-    stage("macro curves done")
-    # yarn level against macro on the same physics: the macro layer fed the yarn-level cushions
-    # 30 load steps also in the quick run: the seamed curve is step-converged there (60 steps: 1 % from
-    # it; 15 steps 5 %, 8 steps 12 % off, and no faster: failed steps are halved), README
-    seamed, seam_summ, paths = seamed_stage(cell, curve, profiles["yarn"], out, steps=30)
-    outputs.update(paths)
-    stage(f"yarn-level seamed compression vs macro: error {100 * seam_summ['error']:.1f} %, "
-          f"macro {seam_summ['speedup']:.0f}x faster")
-    sa, paths = speed_accuracy_stage(cell, curve, profiles["yarn"], seamed, out, quick=quick,
-                                     seamed_steps=(10,) if quick else (8, 15, 60))
-    outputs.update(paths)
-    stage("speed-accuracy chart done")
-
-    md = [f"# homtex main job ({'quick' if quick else 'full'}), {time.perf_counter() - t0:.0f} s", ""]
-    md += ["## Cushion heights", "",
-           "yarn: the yarn-level seam cell (blind; its pre-strain is a nominal value, no value reaches "
-           "the paper's cushions); foundation: the analytical seam model, eps0 = the machine's needle-thread "
-           "tension 40 % (assumption), layer rigidity calibrated once on d = 24 mm: 18 and 43 mm are "
-           "predictions of that model.", "",
-           _markdown_table(["d, mm (seam cell)", "yarn eps0", "yarn cushion, mm", "yarn seam line, mm",
-                            "yarn run time, s", "foundation eps0", "foundation cushion, mm",
-                            "measured, mm", "paper sim., mm"], rows), ""]
-    st = curve.attrs["status"]
-    md += ["## Unseamed compression (yarn level)", "",
-           _markdown_table(["modulus, kPa", "stress 10 %, kPa", "stress 25 %, kPa", "stress 40 %, kPa", "status"],
-                           [(f"{summ['modulus_kPa']:.0f}", f"{summ['stress_10_kPa']:.1f}",
-                             f"{summ['stress_25_kPa']:.1f}",
-                             f"{summ['stress_40_kPa']:.1f} (beyond the 30 % validity)", st)]), ""]
-    md += ["## Seamed d = 24 mm: macro layer against the yarn-level seam cell", "",
-           f"Macro pre-load law \"thread\" (the stitch thread hands a column's pre-load to the punch over its "
-           f"slack travel, {seam_summ['slack_travel']:.3f} mm from the seam cell's leg tension); its limits in the "
-           f"same run: pre-load held {100 * seam_summ['error_held']:.1f} %, released at contact "
-           f"{100 * seam_summ['error_released']:.1f} %.", "",
-           _markdown_table(["max error to 30 %", f"... before the punch meets the stitch ({seam_summ['w_hit']:.2f} mm)",
-                            "yarn level, s", "macro, ms", "speed-up"],
-                           [(f"{100 * seam_summ['error']:.1f} %", f"{100 * seam_summ['error_pre']:.1f} %",
-                             f"{seam_summ['yarn_seconds']:.2f}",
-                             f"{1e3 * seam_summ['macro_seconds']:.2f}", f"{seam_summ['speedup']:.0f}x")]), ""]
-    md += ["## Speed against accuracy", "",
-           _markdown_table(["question", "model", "run time, s", "error"],
-                           [(str(q), str(m), f"{t:.3g}", f"{e:.2e}") for q, m, t, e in
-                            zip(sa.question.values, sa.model.values, sa.seconds.values, sa.error.values)]), ""]
-    fmax = macro.force.max(dim="plate_displacement", skipna=True)
-    md += ["## Macro curves (force at the end of the punch travel)", "",
-           _markdown_table(["specimen", "max force, N"], [(str(n), f"{float(v):.1f}") for n, v in
-                                                          zip(macro.specimen.values, fmax.values)]), ""]
-    summary = out / "summary.md"
-    summary.write_text("\n".join(md))
-    outputs["summary tables (markdown)"] = summary
-    stage(f"done; tables in {summary}")
-    return outputs
 
 
-def _load(path):
-    from ..cells import load_cell
-
-    return load_cell(path)
-
-
-def cell_summary(path, out: Path) -> dict:
-    """Picture (yarn systems coloured), VTK (if meshio is installed) and a text summary."""
-    from ..output.plot import plot_cell
-
-    cell = _load(path)
-    out = Path(out)
-    f = cell.frame
-    lines = [f"cell {cell.name} ({cell.path}): generator {cell.generator}",
-             f"  {f.n_nodes} nodes, {f.n_elements} elements, {f.ndof} DOF, {f.dim_periodic}-periodic",
-             *(f"  group {g}: {int(np.sum(m))} elements" for g, m in cell.groups.items()),
-             *(f"  yarn {n}: {y}" for n, y in cell.yarns.items())]
-    for key in ("thickness", "n_bonds", "overlaps"):
-        if key in cell.info:
-            v = cell.info[key]
-            lines.append(f"  {key}: {len(v) if hasattr(v, '__len__') else v}")
-    print("\n".join(lines))
-    paths = {"picture": plot_cell(cell, out / f"{cell.name}.png")}
-    try:
-        from ..output.vtk import write_vtk
-
-        paths["VTK"] = write_vtk(f, out / f"{cell.name}.vtu")
-    except InputError as exc:   # meshio missing
-        print(f"  (no VTK: {exc})")
-    txt = out / f"{cell.name}.txt"
-    txt.write_text("\n".join(lines) + "\n")
-    paths["summary"] = txt
-    return paths
-
-
-def homogenize_cell(path, out: Path, *, solver="amg"):
-    """Effective stiffness of a periodic cell file: netCDF + a PNG of C and the constants.
-
-    Returns (Dataset, [paths]).
-    """
-    from ..cells import load_cell
-    from ..analysis.periodic import homogenize
-
-    cell = load_cell(path)
-    res = homogenize(cell.frame, solver=solver)
-    ds = res.to_dataset()
-    ds.attrs.update({f"cell_{k}": v for k, v in cell.attrs().items()})
-    _attrs(ds, title=f"effective stiffness of {cell.name}")
-    out = Path(out)
-    nc = _save(ds, out / f"{cell.name}_homogenized.nc")
-
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(5.5, 4.5))
-    C = res.C
-    im = ax.imshow(C, cmap="viridis")
-    for (i, j), v in np.ndenumerate(C):
-        ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7, color="w")
-    ax.set_xticks(range(len(res.components)), res.components)
-    ax.set_yticks(range(len(res.components)), res.components)
-    fig.colorbar(im, ax=ax, label=res.units)
-    consts = ", ".join(f"{k}={v:.3g}" for k, v in res.engineering_constants().items())
-    ax.set_title(f"{cell.name}: C ({res.units})\n{consts}", fontsize=8)
-    fig.tight_layout()
-    png = out / f"{cell.name}_homogenized.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return ds, [nc, png]
-
-
-def compress_cell(path, out: Path, *, strain=0.3, steps=20):
-    cell = _load(path)
-    curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True)
-    print(f"modulus {summ['modulus_kPa']:.1f} kPa; stress at 10/25/40 %: {summ['stress_10_kPa']:.2f} / "
-          f"{summ['stress_25_kPa']:.2f} / {summ['stress_40_kPa']:.2f} kPa; status {curve.attrs['status']}")
-    return curve, list(paths.values())
-
-
-def seam_cell(path, out: Path, *, seam_distance, prestrain=None, method="yarn"):
-    from ..output.plot import plot_profile
-    from ..seams import seam_profile
-
-    cell = _load(path)
-    prof = seam_profile(cell, seam_distance=seam_distance, prestrain=prestrain, method=method)
-    out = Path(out)
-    stem = f"{cell.name}_seam_{float(seam_distance):g}mm_{method}"
-    nc = _save(_attrs(prof, title=f"cushion profile, d = {seam_distance} mm"), out / f"{stem}.nc")
-    png = plot_profile(prof, out / f"{stem}.png")
-    return prof, [nc, png]
-
-
-def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0, pre_stress="thread",
-               slack_travel=None, seam_method="yarn"):
-    from ..macro import macro_curve
-
-    cell = _load(path)
-    ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,
-                     pre_stress=pre_stress, slack_travel=slack_travel,
-                     profile_options={"method": seam_method})
-    ds.attrs["seam_method"] = seam_method
-    out = Path(out)
-    stem = f"{cell.name}_macro_" + ("noseam" if seam_distance is None else f"{float(seam_distance):g}mm")
-    nc = _save(_attrs(ds, title="macro cushion layer"), out / f"{stem}.nc")
-    return ds, [nc, plot_file(nc, out / f"{stem}.png")]
-
-
-def plot_file(path, out=None) -> Path:
-    """A chart of any homtex netCDF file: every 1-D variable against its dimension
-    (one panel per dimension, variables with the same units share an axis)."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no such file: {path}")
-    with xr.open_dataset(path) as ds:
-        ds = ds.load()
-    groups: dict = {}
-    for name, v in ds.data_vars.items():
-        if v.ndim == 1 and np.issubdtype(v.dtype, np.number):
-            groups.setdefault(v.dims[0], []).append(name)
-    if not groups:
-        raise InputError(f"{path}: no 1-D numeric variable to plot")
-    plt = _plt()
-    fig, axes = plt.subplots(len(groups), 1, figsize=(7, 3.2 * len(groups)), squeeze=False)
-    for ax, (dim, names) in zip(axes[:, 0], groups.items()):
-        xdim = ds[dim] if dim in ds.coords else np.arange(ds.sizes[dim])
-        for name in names[:8]:
-            v = ds[name]
-            ax.plot(np.asarray(xdim), v.values, marker=".",
-                    label=f"{v.attrs.get('long_name', name)} [{v.attrs.get('units', '')}]")
-        unit = ds[dim].attrs.get("units", "") if dim in ds.coords else ""
-        ax.set(xlabel=f"{dim} [{unit}]" if unit else dim)
-        ax.legend(fontsize=7)
-    fig.suptitle(ds.attrs.get("title", path.name), fontsize=9)
-    fig.tight_layout()
-    png = Path(out) if out else path.with_suffix(".png")
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png

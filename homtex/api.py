@@ -1,0 +1,150 @@
+"""The public entry points that dispatch to a stage: ``solve_static`` (with or without contact)
+and ``compress`` (linear or co-rotational beams). They check their arguments, read the
+defaults of :mod:`homtex.config` and hand over; the work is done in the stage's room."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .analysis.static import solve_linear
+from .config import option
+from .contact.compress import CompressionTest, run_compression
+from .contact.options import Contact
+from .contact.solver import solve_contact
+from .errors import InputError
+from .fem.assembly import Assembler
+from .model.frame import Frame
+from .model.results import StaticResult
+
+__all__ = ["compress", "solve_static"]
+
+GEOMETRIES = ("linear", "nonlinear")
+
+
+def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str | None = None, tol: float | None = None,
+                 maxiter: int | None = None, contact: Contact | None = None, assembler: Assembler | None = None,
+                 **contact_options) -> StaticResult:
+    """Solve K u = f for a (non-periodic) frame with supports and loads.
+
+    Parameters
+    ----------
+    frame : Frame
+    fixed : dict node -> "all" | [DOFs 0..5] | {DOF: value}
+        Supports; listed DOFs are held at zero, dict values are prescribed (mm, rad).
+    loads : dict node -> (Fx, Fy, Fz, Mx, My, Mz), N and N mm.
+    solver : "amg", "direct" or "cg" (default: option ``static_solver``, "amg").
+    tol : relative residual of iterative solvers (default: option ``tol``, 1e-10).
+    contact : homtex.Contact or None
+        With contact, yarns cannot interpenetrate (see :mod:`homtex.contact`); then
+        ``plates`` (rigid planes) and ``u_ref`` (linearisation point) are accepted too.
+
+    Raises
+    ------
+    InputError for bad supports/loads; SolverError for unheld parts or a failed solve.
+    """
+    if not isinstance(frame, Frame):
+        raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
+    if contact is not None:
+        return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
+                             maxiter=maxiter, assembler=assembler, **contact_options)
+    if contact_options:
+        raise InputError(f"unknown options {sorted(contact_options)}")
+    return solve_linear(frame, fixed, loads, solver=solver, tol=tol, maxiter=maxiter, assembler=assembler)
+
+
+def _frame_of(obj):
+    if isinstance(obj, Frame):
+        return obj, None, {}
+    fr = getattr(obj, "frame", None)
+    if not isinstance(fr, Frame):
+        raise InputError(f"compress needs a homtex.Frame or an object with a .frame (a homtex Cell), "
+                         f"got {type(obj).__name__}")
+    groups = getattr(obj, "groups", None)
+    info = getattr(obj, "info", None) or {}
+    return fr, groups, info
+
+
+def _targets(v, steps, name):
+    arr = np.atleast_1d(np.asarray(v, dtype=float))
+    if arr.size == 1:
+        if not (np.isfinite(arr[0]) and arr[0] > 0):
+            raise InputError(f"{name} must be positive, got {v!r}")
+        return arr[0] * np.arange(1, int(steps) + 1) / int(steps)
+    if not (np.all(np.isfinite(arr)) and np.all(arr > 0) and np.all(np.diff(arr) > 0)):
+        raise InputError(f"{name} values must be positive and increasing")
+    return arr
+
+
+def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "displacement",
+             contact: Contact | None = None, pressure=None, fixed=None, thickness: float | None = None,
+             area: float | None = None, solver: str | None = None, tol: float | None = None,
+             maxiter: int | None = None, max_cuts: int = 4, progress: bool | None = None, geometry: str = "linear",
+             stabilize: float = 0.0):
+    """Compression curve of a cell between two rigid frictionless plates.
+
+    Parameters
+    ----------
+    cell_or_frame : homtex.Frame, or an object with ``.frame`` (a homtex Cell; its ``.groups``
+        {name: (m,) bool element mask} give per-group energies, ``.info["thickness"]`` the
+        plate distance).
+    strain : final compression strain (plate displacement / initial plate distance, > 0), or
+        an increasing array of strains (displacement control).
+    steps : number of equal steps up to ``strain`` (or ``pressure``).
+    control : "displacement" (the top plate moves) or "force" (uniform ``pressure`` on it).
+    pressure : final pressure (kPa) or an increasing array (force control).
+    contact : Contact options (default ``Contact()``: pdas, augmented Lagrangian).
+    fixed : extra supports (dict as in ``solve_static``); default pins the in-plane rigid
+        motions that frictionless plates leave free (ux, uy of the lowest node for a 2-periodic
+        frame; plus one in-plane DOF against rotation about z for a finite frame).
+    thickness : plate distance, mm (default ``info["thickness"]``, else the yarns' extent
+        (z_max + r) - (z_min - r)); the bottom plate touches the lowest yarn surface.
+    area : nominal area for the stress, mm^2 (default |p1 x p2| of a 2-periodic frame in x-y,
+        else the x-y bounding box of the yarns).
+    solver, tol : linear solver and tolerance (default: options ``compress_solver`` ("direct")
+        and ``tol``).
+    max_cuts : a step whose contact iteration fails (cycling active set, penetration, solver
+        failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
+        1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
+    progress : show a progress bar (default: option ``progress``).
+    geometry : "linear" (small rotations; contact re-linearised per step) or "nonlinear"
+        (co-rotational beams, Newton iterations per step: yarns may rotate and buckle; the
+        large-compression regime the linear model does not reach).
+    stabilize : viscous stabilisation of the nonlinear steps (see
+        :func:`homtex.contact.newton.newton_contact`); its largest force is recorded per step.
+
+    Returns
+    -------
+    xarray.Dataset over ``strain`` (compression positive) with stress (kPa), force (N),
+    plate_displacement (mm), active contacts (total, yarn-yarn, yarn-plate), max penetration
+    (mm), contact iterations, linear solves, energies (N mm) and, with groups, ``group_energy``.
+    A failing step ends the curve: the steps before it are kept, ``attrs["status"]`` is
+    "failed" and ``attrs["status_detail"]`` says why ("ok" otherwise).
+    """
+    frame, groups, info = _frame_of(cell_or_frame)
+    if control not in ("displacement", "force"):
+        raise InputError(f"control must be 'displacement' or 'force', got {control!r}")
+    contact = Contact() if contact is None else contact
+    if not isinstance(contact, Contact):
+        raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
+    if int(steps) != steps or steps < 1:
+        raise InputError(f"steps must be a positive integer, got {steps!r}")
+    if geometry not in GEOMETRIES:
+        raise InputError(f"geometry must be 'linear' or 'nonlinear', got {geometry!r}")
+    if not (np.isfinite(stabilize) and 0.0 <= stabilize < 1.0):
+        raise InputError(f"stabilize must lie in [0, 1) (fraction of the diagonal stiffness), got {stabilize!r}")
+    if int(max_cuts) != max_cuts or max_cuts < 0:
+        raise InputError(f"max_cuts must be a non-negative integer, got {max_cuts!r}")
+    test = CompressionTest.build(frame, thickness=thickness, area=area, fixed=fixed, groups=groups, info=info)
+    if control == "displacement":
+        if strain is None:
+            raise InputError("compress: 'strain' (final compression strain) is required for displacement control")
+        targets = _targets(strain, steps, "strain")
+        if np.any(targets >= 1.0):
+            raise InputError(f"strain must stay below 1 (plates would meet), got max {targets.max()}")
+    else:
+        if pressure is None:
+            raise InputError("compress: 'pressure' (kPa) is required for control='force'")
+        targets = _targets(pressure, steps, "pressure")
+    return run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
+                           tol=option("tol", tol), maxiter=maxiter, max_cuts=int(max_cuts),
+                           progress=option("progress", progress), geometry=geometry, stabilize=float(stabilize))

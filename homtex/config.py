@@ -1,0 +1,145 @@
+"""Package-wide defaults: ``homtex.set_options`` and ``homtex.get_options``.
+
+Every entry point that takes a ``solver`` or ``tol`` reads its default here when the argument
+is left at None, so a default lives in one place::
+
+    homtex.set_options(static_solver="direct")            # from now on
+    with homtex.set_options(compress_solver="amg", tol=1e-8):
+        homtex.compress(cell, strain=0.3)                 # only inside the block
+
+Options (validated when set; an unknown name or a bad value is an InputError):
+
+============================ ============ ==========================================================
+name                         default      meaning
+============================ ============ ==========================================================
+``static_solver``            ``"amg"``    ``solve_static`` (also with contact): "amg", "direct", "cg"
+``homogenize_solver``        ``"amg"``    ``homogenize``, ``solve_macro``, ``compression_modulus``
+``compress_solver``          ``"direct"`` ``compress``, seam cells (``seam_profile``, ``seam_compression``);
+                                          small, often ill-conditioned contact systems
+``nonlinear_solver``         ``"direct"`` ``solve_nonlinear`` (Newton steps)
+``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
+``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
+                                          diagonal of the frame stiffness (about EA / L)
+``modulus_penalty``          ``5000.0``   penalty (N/mm) of the small-strain compression that
+                                          measures a fabric's modulus for the foundation seam model
+``threads``                  ``None``     numba and BLAS threads (None: all cores)
+``progress``                 ``False``    progress bars in long computations (the command line
+                                          turns them on)
+============================ ============ ==========================================================
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable
+
+from .errors import InputError
+
+__all__ = ["OPTIONS", "get_options", "option", "set_options"]
+
+SOLVERS = ("amg", "direct", "cg")
+
+
+def _solver(v) -> bool:
+    return v in SOLVERS
+
+
+def _tol(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0.0 < v < 1.0
+
+
+def _penalty(v) -> bool:
+    return v is None or (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0)
+
+
+def _threads(v) -> bool:
+    return v is None or (isinstance(v, int) and not isinstance(v, bool) and v >= 1)
+
+
+def _bool(v) -> bool:
+    return isinstance(v, bool)
+
+
+_DEFAULTS: dict[str, Any] = {
+    "static_solver": "amg",
+    "homogenize_solver": "amg",
+    "compress_solver": "direct",
+    "nonlinear_solver": "direct",
+    "tol": 1e-10,
+    "contact_penalty": None,
+    "modulus_penalty": 5000.0,
+    "threads": None,
+    "progress": False,
+}
+
+_VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "static_solver": (_solver, f"one of {SOLVERS}"),
+    "homogenize_solver": (_solver, f"one of {SOLVERS}"),
+    "compress_solver": (_solver, f"one of {SOLVERS}"),
+    "nonlinear_solver": (_solver, f"one of {SOLVERS}"),
+    "tol": (_tol, "a finite number in (0, 1)"),
+    "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
+    "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),
+    "threads": (_threads, "None or an integer >= 1"),
+    "progress": (_bool, "True or False"),
+}
+
+#: the current options (read with :func:`option`; change with :func:`set_options`)
+OPTIONS: dict[str, Any] = dict(_DEFAULTS)
+
+
+def _apply_threads(n) -> None:
+    """Set numba's and the BLAS pools' thread counts (None: all cores)."""
+    import numba
+
+    n = numba.config.NUMBA_NUM_THREADS if n is None else min(int(n), numba.config.NUMBA_NUM_THREADS)
+    numba.set_num_threads(n)
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(n)
+    except ImportError:  # pragma: no cover - threadpoolctl is a core dependency
+        pass
+
+
+class set_options:
+    """Change options for the session, or for a ``with`` block (restored on exit).
+
+    >>> homtex.set_options(tol=1e-8)
+    >>> with homtex.set_options(static_solver="direct"):
+    ...     ...
+    """
+
+    def __init__(self, **kwargs):
+        self.old: dict[str, Any] = {}
+        for name, value in kwargs.items():
+            if name not in _VALIDATORS:
+                raise InputError(f"set_options: unknown option {name!r}; options are {sorted(_VALIDATORS)}")
+            ok, what = _VALIDATORS[name]
+            if not ok(value):
+                raise InputError(f"set_options: option {name!r} must be {what}, got {value!r}")
+        for name, value in kwargs.items():
+            self.old[name] = OPTIONS[name]
+            OPTIONS[name] = value
+            if name == "threads":
+                _apply_threads(value)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        for name, value in self.old.items():
+            OPTIONS[name] = value
+            if name == "threads":
+                _apply_threads(value)
+        return False
+
+
+def get_options() -> dict[str, Any]:
+    """A copy of the current options."""
+    return dict(OPTIONS)
+
+
+def option(name: str, value=None):
+    """``value`` if it is given (not None), else the current option ``name``."""
+    return OPTIONS[name] if value is None else value

@@ -1,0 +1,231 @@
+"""Study files (TOML data, nothing executed): parameters as grids or seeded samples.
+
+A study file::
+
+    [study]
+    name = "square_stiffness"
+    cell = "../cells/square.toml"      # relative to the study file (optional for cell-free tasks)
+    task = "homogenize"                # compress | seam | homogenize | macro | analytic
+    description = "..."                # optional
+
+    [options]                          # fixed keyword options of the task
+    solver = "direct"
+
+    [parameters]                       # a grid: every combination (C order, first name slowest)
+    "yarns.strut.E" = [1000.0, 2000.0, 3000.0]
+    "yarns.strut.radius" = [0.04, 0.05]
+
+    # or, instead of [parameters], samples:
+    [sampling]
+    method = "lhs"                     # "lhs" (Latin hypercube) or "sobol" (scrambled), scipy.stats.qmc
+    n = 16
+    seed = 1
+    [sampling.bounds]
+    "yarns.strut.radius" = [0.03, 0.06]
+
+    [units]                            # optional: units of the parameters (else guessed from the key)
+    "yarns.strut.E" = "MPa"
+
+Parameter names that start with a cell table (``cell``, ``parameters``, ``yarns``,
+``resolution``) change the cell through :meth:`homtex.Cell.replace` (dotted keys); all other
+names are keyword options of the task. String options whose name ends in ``_file`` are
+paths relative to the study file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import warnings
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import qmc
+
+from ..cells import TABLES, load_cell
+from ..errors import StudyError
+from .tasks import get_task
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - python 3.10
+    import tomli as tomllib  # type: ignore
+
+__all__ = ["Study", "base_cell", "load_study", "sample_points"]
+
+
+@lru_cache(maxsize=4)
+def base_cell(path: str):
+    """The cell file of a study, loaded once per process."""
+    return load_cell(path)
+
+
+_UNIT_GUESS = {"E": "MPa", "G": "MPa", "nu": "1", "radius": "mm", "contact_radius": "mm", "a": "mm",
+               "thickness": "mm", "seam_distance": "mm", "height_scatter": "mm", "strain": "1",
+               "stitch_length": "mm", "prestrain": "1", "eps0": "1", "tol": "1"}
+
+
+class Study:
+    """A parsed study: points (list of {name: value}), layout (grid or samples), task, cell."""
+
+    def __init__(self, data: dict, path=None):
+        self.path = None if path is None else str(Path(path))
+        f = self.path
+        try:
+            for key in data:
+                if key not in ("study", "options", "parameters", "sampling", "units"):
+                    raise StudyError("unknown table; a study has [study], [options], [parameters] or "
+                                     "[sampling], [units]", table=key)
+            st = data.get("study")
+            if not isinstance(st, dict):
+                raise StudyError("missing table [study]", table="study")
+            for key in st:
+                if key not in ("name", "cell", "task", "description"):
+                    raise StudyError("unknown key; allowed: name, cell, task, description", table="study", key=key)
+            self.name = _str(st, "name", "study")
+            self.task = _str(st, "task", "study")
+            self.description = st.get("description", "")
+            self.cell_path = None
+            if "cell" in st:
+                cp = Path(_str(st, "cell", "study"))
+                if not cp.is_absolute():
+                    cp = (Path(path).parent if path is not None else Path.cwd()) / cp
+                if not cp.exists():
+                    raise StudyError(f"cell file {str(cp)!r} does not exist", table="study", key="cell")
+                self.cell_path = str(cp.resolve())
+            get_task(self.task)
+            self.options = dict(data.get("options", {}))
+            for k, v in self.options.items():  # file options are relative to the study file
+                if k.endswith("_file") and isinstance(v, str) and not Path(v).is_absolute():
+                    self.options[k] = str(((Path(path).parent if path is not None else Path.cwd()) / v).resolve())
+            self.units = {str(k): str(v) for k, v in data.get("units", {}).items()}
+            grid = data.get("parameters")
+            sampling = data.get("sampling")
+            if grid is not None and sampling is not None:
+                raise StudyError("give either [parameters] (a grid) or [sampling], not both", table="sampling")
+            if grid is None and sampling is None:
+                raise StudyError("missing [parameters] (grid lists) or [sampling]", table="parameters")
+            if grid is not None:
+                self.layout = "grid"
+                self.names = list(grid)
+                if not self.names:
+                    raise StudyError("no parameters", table="parameters")
+                self.grid = {}
+                for k, v in grid.items():
+                    if not isinstance(v, list) or not v:
+                        raise StudyError(f"must be a non-empty list of values, got {v!r}", table="parameters", key=k)
+                    if len(set(map(repr, v))) != len(v):
+                        raise StudyError(f"values must be distinct, got {v!r}", table="parameters", key=k)
+                    self.grid[k] = list(v)
+                shape = [len(v) for v in self.grid.values()]
+                idx = np.indices(shape).reshape(len(shape), -1).T
+                self.points = [{k: self.grid[k][i] for k, i in zip(self.names, row)} for row in idx]
+                self.sampling = {}
+            else:
+                self.layout = "samples"
+                self.sampling = dict(sampling)
+                self.names, values = sample_points(self.sampling)
+                self.grid = {}
+                self.points = [{k: float(values[i, j]) for j, k in enumerate(self.names)}
+                               for i in range(len(values))]
+            for k in self.names:
+                if k in self.options:
+                    raise StudyError(f"parameter {k!r} is also a fixed option", table="options", key=k)
+                if _is_cell_key(k) and self.cell_path is None:
+                    raise StudyError(f"parameter {k!r} changes the cell but the study names no cell",
+                                     table="study", key="cell")
+        except StudyError as err:
+            err.file = err.file or f
+            raise
+
+    @property
+    def n_points(self) -> int:
+        return len(self.points)
+
+    def job(self, i: int, out_dir: Path) -> dict:
+        """The picklable job of point i."""
+        p = self.points[i]
+        cell_values = {k: v for k, v in p.items() if _is_cell_key(k)}
+        task_values = {k: v for k, v in p.items() if not _is_cell_key(k)}
+        job = {"index": i, "task": self.task, "cell": self.cell_path, "cell_values": cell_values,
+               "options": {**self.options, **task_values},
+               "file": str(Path(out_dir) / "points" / f"{i:05d}.nc")}
+        job["key"] = _hash({k: job[k] for k in ("task", "cell", "cell_values", "options")})
+        return job
+
+    def unit(self, name: str) -> str:
+        return self.units.get(name, _UNIT_GUESS.get(name.split(".")[-1], "1"))
+
+
+def _str(d, key, table):
+    v = d.get(key)
+    if not isinstance(v, str) or not v.strip():
+        raise StudyError(f"must be a non-empty string, got {v!r}", table=table, key=key)
+    return v
+
+
+def _is_cell_key(name: str) -> bool:
+    return "." in name and name.split(".", 1)[0] in TABLES
+
+
+def _hash(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def sample_points(sampling: dict) -> tuple[list, np.ndarray]:
+    """Seeded Latin-hypercube or scrambled-Sobol samples from a ``[sampling]`` table.
+
+    Returns (names, values (n, d)) scaled into ``bounds`` {name: [lo, hi]}.
+    """
+    for key in sampling:
+        if key not in ("method", "n", "seed", "bounds"):
+            raise StudyError("unknown key; allowed: method, n, seed, bounds", table="sampling", key=key)
+    method = sampling.get("method", "lhs")
+    if method not in ("lhs", "sobol"):
+        raise StudyError(f"must be 'lhs' or 'sobol', got {method!r}", table="sampling", key="method")
+    n = sampling.get("n")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise StudyError(f"must be a positive integer, got {n!r}", table="sampling", key="n")
+    seed = sampling.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise StudyError(f"must be an integer, got {seed!r}", table="sampling", key="seed")
+    bounds = sampling.get("bounds")
+    if not isinstance(bounds, dict) or not bounds:
+        raise StudyError("missing table of {name = [lo, hi]}", table="sampling.bounds")
+    names = list(bounds)
+    lo, hi = [], []
+    for k, b in bounds.items():
+        if (not isinstance(b, list) or len(b) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in b)
+                or not b[0] < b[1]):
+            raise StudyError(f"must be [lo, hi] with lo < hi, got {b!r}", table="sampling.bounds", key=k)
+        lo.append(float(b[0]))
+        hi.append(float(b[1]))
+    d = len(names)
+    rng = np.random.default_rng(seed)
+    if method == "lhs":
+        eng = qmc.LatinHypercube(d, rng=rng)
+        u = eng.random(n)
+    else:
+        eng = qmc.Sobol(d, scramble=True, rng=rng)
+        m = int(round(math.log2(n)))
+        if 2 ** m == n:
+            u = eng.random_base2(m)
+        else:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # balance warning for n not a power of 2
+                u = eng.random(n)
+    return names, qmc.scale(u, lo, hi)
+
+
+def load_study(path) -> Study:
+    """Read and validate a study file (StudyError names file, table and key)."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        raise StudyError("no such file", file=path) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise StudyError(f"not valid TOML: {exc}", file=path) from None
+    return Study(data, p)

@@ -1,0 +1,136 @@
+"""Validation of values read from TOML tables (cell and study files).
+
+Each getter returns the checked value or raises :class:`~homtex.errors.CellError` naming the
+table and key; callers that know the file add it. Generators written elsewhere use the same
+getters, so every cell file reports bad values the same way.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import CellError
+
+__all__ = ["check_keys", "get_int", "get_list", "get_number", "get_str", "get_table", "type_name"]
+
+
+def is_number(v) -> bool:
+    """True for int and float values (not booleans)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def type_name(v) -> str:
+    """'a string', 'a boolean', ... for error messages."""
+    return {str: "a string", bool: "a boolean", int: "an integer", float: "a number",
+            list: "an array", dict: "a table"}.get(type(v), type(v).__name__)
+
+
+def get_number(d: dict, key: str, table: str, *, default=None, gt=None, ge=None, lt=None,
+               le=None, required: bool = True) -> float | None:
+    """A finite number d[key] with optional bounds, else CellError(table, key)."""
+    if key not in d:
+        if default is not None or not required:
+            return default
+        raise CellError("missing key (a number)", table=table, key=key)
+    v = d[key]
+    if not is_number(v):
+        raise CellError(f"must be a number, got {type_name(v)} {v!r}", table=table, key=key)
+    v = float(v)
+    if not math.isfinite(v):
+        raise CellError(f"must be finite, got {v}", table=table, key=key)
+    for bound, op, ok in ((gt, ">", lambda x, b: x > b), (ge, ">=", lambda x, b: x >= b),
+                          (lt, "<", lambda x, b: x < b), (le, "<=", lambda x, b: x <= b)):
+        if bound is not None and not ok(v, bound):
+            raise CellError(f"must be {op} {bound}, got {v:g}", table=table, key=key)
+    return v
+
+
+def get_int(d: dict, key: str, table: str, *, default=None, ge=None) -> int | None:
+    """An integer d[key] (>= ge), else CellError(table, key)."""
+    if key not in d:
+        if default is not None:
+            return default
+        raise CellError("missing key (an integer)", table=table, key=key)
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise CellError(f"must be an integer, got {type_name(v)} {v!r}", table=table, key=key)
+    if ge is not None and v < ge:
+        raise CellError(f"must be >= {ge}, got {v}", table=table, key=key)
+    return int(v)
+
+
+def get_str(d: dict, key: str, table: str, *, default=None, choices=None) -> str | None:
+    """A non-empty string d[key] (one of ``choices``), else CellError(table, key)."""
+    if key not in d:
+        if default is not None:
+            return default
+        raise CellError("missing key (a string)", table=table, key=key)
+    v = d[key]
+    if not isinstance(v, str):
+        raise CellError(f"must be a string, got {type_name(v)} {v!r}", table=table, key=key)
+    if choices is not None and v not in choices:
+        raise CellError(f"must be one of {list(choices)}, got {v!r}", table=table, key=key)
+    if choices is None and not v.strip() and default is None:
+        raise CellError("must not be empty", table=table, key=key)
+    return v
+
+
+def get_list(d: dict, key: str, table: str, *, shape=None, integer: bool = False, default=None,
+             gt=None) -> np.ndarray | None:
+    """A numeric array d[key] of the given shape (None entries: any size)."""
+    if key not in d:
+        if default is not None:
+            return np.asarray(default)
+        raise CellError("missing key (an array)", table=table, key=key)
+    v = d[key]
+    if not isinstance(v, list):
+        raise CellError(f"must be an array, got {type_name(v)} {v!r}", table=table, key=key)
+    flat = list(_flatten(v))
+    kind = "integers" if integer else "numbers"
+    if not all((isinstance(x, int) and not isinstance(x, bool)) if integer else is_number(x) for x in flat):
+        raise CellError(f"must be an array of {kind}, got {v!r}", table=table, key=key)
+    try:
+        arr = np.asarray(v, dtype=np.int64 if integer else float)
+    except ValueError:
+        raise CellError(f"must be a rectangular array of {kind}, got {v!r}", table=table, key=key) from None
+    if shape is not None:
+        ok = arr.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, arr.shape))
+        if not ok:
+            want = "x".join("n" if s is None else str(s) for s in shape)
+            raise CellError(f"must have shape {want}, got {list(arr.shape)}", table=table, key=key)
+    if not integer and not np.isfinite(arr).all():
+        raise CellError(f"must be finite, got {v!r}", table=table, key=key)
+    if gt is not None and arr.size and not (arr > gt).all():
+        raise CellError(f"entries must be > {gt}, got {v!r}", table=table, key=key)
+    return arr
+
+
+def _flatten(v):
+    for x in v:
+        if isinstance(x, list):
+            yield from _flatten(x)
+        else:
+            yield x
+
+
+def check_keys(d: dict, allowed, table: str) -> None:
+    """CellError for the first key of d not in ``allowed``."""
+    for key in d:
+        if key not in allowed:
+            raise CellError(f"unknown key; allowed keys are {sorted(allowed)}", table=table, key=key)
+
+
+def get_table(d, key, table, required=True) -> dict:
+    """The sub-table d[key] ({} when absent and not required), else CellError."""
+    if key not in d:
+        if required:
+            raise CellError(f"missing table [{key}]" if not table else "missing table",
+                            table=table or None, key=key if table else None)
+        return {}
+    v = d[key]
+    if not isinstance(v, dict):
+        name = f"{table}.{key}" if table else key
+        raise CellError(f"must be a table, got {type_name(v)} {v!r}", table=name)
+    return v
