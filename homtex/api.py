@@ -5,6 +5,7 @@ defaults of :mod:`homtex.config` and hand over; the work is done in the stage's 
 from __future__ import annotations
 
 import numpy as np
+import xarray as xr
 
 from .analysis.static import solve_linear
 from .config import option
@@ -79,7 +80,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
              contact: Contact | None = None, pressure=None, fixed=None, thickness: float | None = None,
              area: float | None = None, solver: str | None = None, tol: float | None = None,
              maxiter: int | None = None, max_cuts: int = 4, progress: bool | None = None, geometry: str = "linear",
-             stabilize: float = 0.0):
+             stabilize: float = 0.0) -> xr.Dataset:
     """Compression curve of a cell between two rigid frictionless plates.
 
     Parameters

@@ -219,7 +219,8 @@ class Lookup:
             else every 1-D numeric coordinate that is a dimension of the output (grid) or lies
             along ``sample``). Remaining dimensions of the output become ``extra_dims``.
         kw : bounds [(lo, hi)] per input (samples; default the study's ``sampling_bounds``
-            attribute, else the samples' extent), method ("linear"/"cubic", grids), kernel (thin_plate_spline, cubic, linear)/smoothing/degree (samples),
+            attribute, else the samples' extent), method ("linear"/"cubic", grids), kernel
+            (thin_plate_spline, cubic, linear)/smoothing/degree (samples),
             holdout_folds, seed, extrapolate.
         """
         if output not in ds.data_vars:
@@ -254,8 +255,8 @@ class Lookup:
         extra = tuple(d for d in da.dims if d not in inputs)
         if "status" in ds and (ds["status"] != 0).any():
             bad = ds["status"].where(ds["status"] != 0, drop=True)
-            raise InputError(f"Lookup: {int(bad.count())} grid point(s) failed (status != 0), e.g. at "
-                             f"{ {k: float(v) for k, v in bad.isel({d: 0 for d in bad.dims}).coords.items() if k in inputs} }; "
+            first = {k: float(v) for k, v in bad.isel({d: 0 for d in bad.dims}).coords.items() if k in inputs}
+            raise InputError(f"Lookup: {int(bad.count())} grid point(s) failed (status != 0), e.g. at {first}; "
                              f"a tensor grid needs every node")
         da = da.transpose(*inputs, *extra)
         axes = [np.asarray(ds[n].values, dtype=float) for n in inputs]

@@ -50,7 +50,6 @@ import math
 import time
 
 import numpy as np
-
 import xarray as xr
 
 from .api import compress
@@ -93,7 +92,8 @@ def unseamed_law(curve):
             raise InputError(f"macro_curve: a Lookup curve must have the single input 'strain', got {curve.names}")
         return (lambda e: curve(np.asarray(e, dtype=float).reshape(-1, 1)).reshape(np.shape(e))), float(curve.hi[0])
     if not hasattr(curve, "data_vars") or "stress" not in curve or "strain" not in curve.coords:
-        raise InputError("macro_curve: curve must be a Dataset with 'stress' (kPa) over 'strain', a Lookup or a callable")
+        raise InputError("macro_curve: curve must be a Dataset with 'stress' (kPa) over 'strain', a Lookup or "
+                         "a callable")
     eps = np.asarray(curve["strain"].values, dtype=float)
     sig = np.asarray(curve["stress"].values, dtype=float)
     ok = np.isfinite(eps) & np.isfinite(sig)
@@ -152,7 +152,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
                 steps: int = 201, thickness: float | None = None, pre_stress: str = "thread",
                 slack_travel: float | None = None, seam_offset: float = 0.0, compress_options: dict | None = None,
-                profile_options: dict | None = None):
+                profile_options: dict | None = None) -> xr.Dataset:
     """Force-compression curve of a (seamed) specimen under a flat punch: the cushion layer.
 
     Parameters
@@ -281,7 +281,8 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                            {"units": "1", "long_name": "compression strain (plate displacement / unseamed thickness)"}),
                 "column_x": ("column_x", x, {"units": "mm", "long_name": "column centre across the seams"})},
         attrs={"model": "macro cushion layer (columns engaged one after another)", "thickness_mm": H0,
-               "plate_area_mm2": float(plate_area), "seam_distance_mm": "none" if seam_distance is None else float(seam_distance),
+               "plate_area_mm2": float(plate_area),
+               "seam_distance_mm": "none" if seam_distance is None else float(seam_distance),
                "height_scatter_mm": float(height_scatter), "seed": "none" if seed is None else int(seed),
                "n_columns": int(n_columns), "pre_stress": pre_stress,
                "slack_travel_mm": "none" if delta is None else float(delta), "seam_offset_mm": float(seam_offset),

@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
+from conftest import line_frame, random_frame
 
 import homtex
 from homtex.fem.assembly import Assembler, assemble_reference
 from homtex.fem.beam import local_stiffness
 from homtex.model.sections import section_properties
-
-from conftest import line_frame, random_frame
 
 L, E, NU = 100.0, 2000.0, 0.3
 

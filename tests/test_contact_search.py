@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from homtex import Frame
-from homtex.contact.broad import exclusion_lists, find_pairs, find_pairs_kdtree, BroadPhase
+from homtex.contact.broad import BroadPhase, exclusion_lists, find_pairs, find_pairs_kdtree
 from homtex.contact.narrow import closest_points_reference, segment_pairs
 
 
@@ -112,7 +112,8 @@ def test_grid_matches_kdtree_periodic_box():
     r = np.full(m, 0.05)
     g = find_pairs(p0, d, r, 0.02, np.diag(box))
     q = find_pairs_kdtree(p0, d, r, 0.02, box=box)
-    key = lambda res: {(int(a), int(b), tuple(int(x) for x in i)) for a, b, i in zip(res["a"], res["b"], res["image"])}
+    def key(res):
+        return {(int(a), int(b), tuple(int(x) for x in i)) for a, b, i in zip(res["a"], res["b"], res["image"])}
     assert len(g["a"]) > 50
     assert key(g) == key(q)
 

@@ -6,10 +6,10 @@ import scipy.sparse as sp
 
 import homtex
 from homtex import SolverError
+from homtex.analysis.periodic import _Operator, unit_strains
 from homtex.geometry.lattices import lattice_frame
 from homtex.linalg.krylov import BlockOperator, bsr_gemm
 from homtex.linalg.multirhs import BatchedVCycle, block_pcg, solve_many
-from homtex.analysis.periodic import _Operator, unit_strains
 from homtex.linalg.nullspace import rigid_body_modes
 from homtex.linalg.solvers import LinearSolver, ScaledAMG
 

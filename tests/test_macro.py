@@ -184,8 +184,9 @@ def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
     from pathlib import Path
 
     seams = pytest.importorskip("homtex.seams")
-    import homtex.macro as macro
     import xarray as xr
+
+    import homtex.macro as macro
 
     cell_file = Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml"
     if not cell_file.exists():

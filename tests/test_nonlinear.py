@@ -2,16 +2,15 @@
 
 import numpy as np
 import pytest
+from conftest import line_frame
 from scipy.optimize import brentq
 from scipy.special import ellipe, ellipk
 
 import homtex
+from homtex import solve_nonlinear
+from homtex.analysis.nonlinear import Corotational
 from homtex.errors import InputError, SolverError
 from homtex.fem.corotational import expmap, logmap
-from homtex.analysis.nonlinear import Corotational
-from homtex import solve_nonlinear
-
-from conftest import line_frame
 
 E, NU = 2000.0, 0.3
 

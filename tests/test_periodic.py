@@ -5,12 +5,12 @@ import pytest
 
 import homtex
 from homtex import Frame, InputError, SolverError
-from homtex.fem.assembly import assemble_reference
-from homtex.fem.beam import local_stiffness
-from homtex.geometry.lattices import lattice_frame
 from homtex.analysis.compression import compression_modulus
 from homtex.analysis.macrostrain import solve_macro
 from homtex.analysis.periodic import jump_load, rotate_stiffness
+from homtex.fem.assembly import assemble_reference
+from homtex.fem.beam import local_stiffness
+from homtex.geometry.lattices import lattice_frame
 from homtex.geometry.tiling import periodize
 
 E_WALL, NU_WALL = 3000.0, 0.3

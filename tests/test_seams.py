@@ -252,8 +252,8 @@ def test_foundation_no_prestrain_flat_and_symmetric(cell):
 
 
 def test_plots_and_vtk(cell, tmp_path):
-    from homtex.output.plot import plot_cell, plot_profile
     from homtex.output import vtk
+    from homtex.output.plot import plot_cell, plot_profile
     assert plot_cell(cell, tmp_path / "c.png").stat().st_size > 1000
     assert plot_profile(homtex.seam_profile(cell, seam_distance=24.0, method="foundation"),
                         tmp_path / "p.png").stat().st_size > 1000
@@ -325,4 +325,5 @@ def test_ramp_refuses_a_thread_that_went_through(cell):
         c = cell.replace(**{"parameters.bars.top_inlay.lapping": lap, "parameters.bars.bottom_inlay.lapping": lap,
                             "yarns.multifilament.bending_factor": 100.0, "yarns.multifilament.torsion_factor": 100.0})
         p = homtex.seam_profile(c, seam_distance=24.0, prestrain=0.7, steps=8)
-    assert p.attrs["status"] == "failed" and "bobbin thread slipped through the bottom layer" in p.attrs["status_detail"]
+    assert p.attrs["status"] == "failed"
+    assert "bobbin thread slipped through the bottom layer" in p.attrs["status_detail"]

@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
+from conftest import line_frame
 
 import homtex
 from homtex.geometry.lattices import lattice_frame
-
-from conftest import line_frame
 
 
 def clamped_block(name, repeat, radius, eps=2, load=(0.3, 0.1, -1.0)):

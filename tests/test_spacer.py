@@ -46,7 +46,8 @@ def test_threading():
 
 
 def _fabric(**kw):
-    y = {"mf": YarnType(name="mf", radius=0.12, E=3000.0, nu=0.3), "mono": YarnType(name="mono", radius=0.1, E=5000.0, nu=0.35)}
+    y = {"mf": YarnType(name="mf", radius=0.12, E=3000.0, nu=0.3),
+         "mono": YarnType(name="mono", radius=0.1, E=5000.0, nu=0.35)}
     bars = {"pillar": dict(lapping="1-0/0-1//", yarn="mf", bed="front"),
             "inlay": dict(lapping="0-0/2-2//", yarn="mf", bed="front", threading="1-in 1-out"),
             "pile": dict(lapping="1-0-2-3/2-3-1-0//", yarn="mono", bed="both"),
@@ -97,7 +98,8 @@ def test_resolution_scales_elements():
 
 
 def test_overlaps_reported():
-    y = {"mf": YarnType(name="mf", radius=0.25, E=3000.0, nu=0.3), "mono": YarnType(name="mono", radius=0.1, E=5000.0, nu=0.35)}
+    y = {"mf": YarnType(name="mf", radius=0.25, E=3000.0, nu=0.3),
+         "mono": YarnType(name="mono", radius=0.1, E=5000.0, nu=0.35)}
     bars = {"pillar": dict(lapping="1-0/0-1//", yarn="mf", bed="front"),
             "inlay": dict(lapping="0-0/2-2//", yarn="mf", bed="front"),
             "pile": dict(lapping="1-0-2-3/2-3-1-0//", yarn="mono", bed="both")}
@@ -164,7 +166,8 @@ def test_supercell_gives_same_stress(cell, curve):
         el2.append(np.column_stack([el[:, 0] + c * n, el[:, 1] + jc * n]))
         im2.append(np.column_stack([wrap, im[:, 1]]))
     fr2 = homtex.Frame(nodes2, np.vstack(el2), semi_axes=np.tile(np.column_stack([fr.a, fr.b]), (2, 1)),
-                       E=np.tile(fr.E, 2), nu=np.tile(fr.nu, 2), yarn=np.concatenate([fr.yarn, fr.yarn + fr.yarn.max() + 1]),
+                       E=np.tile(fr.E, 2), nu=np.tile(fr.nu, 2),
+                       yarn=np.concatenate([fr.yarn, fr.yarn + fr.yarn.max() + 1]),
                        ref=np.tile(fr.R[:, 1], (2, 1)), periods=np.array([2 * P[0], P[1]]), images=np.vstack(im2),
                        contact_radius=np.tile(fr.contact_radius, 2))
     c2 = homtex.compress(fr2, strain=0.3, steps=10, contact=PENALTY, thickness=20.0)

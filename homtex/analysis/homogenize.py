@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import get_num_threads
 
-from ..errors import InputError, SolverError
 from ..config import option
+from ..errors import InputError, SolverError
 from ..fem.periodic import pair_work_kernel
 from ..linalg.multirhs import solve_many
 from ..model.frame import Frame

@@ -71,7 +71,6 @@ def solve_macro(frame: Frame, strain, *, free=None, solver: str | None = None, t
     if not np.isfinite(E).all():
         raise InputError(f"strain is not finite: {E.tolist()}")
     fi = _component_index(frame, free)
-    pi = [i for i in range(len(comps)) if i not in fi]
     Hunit = unit_strains(frame)
     E[fi] = 0.0
     Hp = np.einsum("c,cab->ab", E, Hunit)[None]

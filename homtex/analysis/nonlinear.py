@@ -19,11 +19,11 @@ import numpy as np
 
 from ..config import option
 from ..errors import InputError, SolverError
-from ..model.results import ENERGY_KEYS
 from ..fem.assembly import Assembler
 from ..fem.corotational import add_geometric, corotational_response, gather_ends, log_nodes, rotate_nodes
-from ..model.frame import Frame
 from ..linalg.solvers import LinearSolver, constrain
+from ..model.frame import Frame
+from ..model.results import ENERGY_KEYS
 from ..model.scene import check_held, parse_fixed, parse_loads
 
 GEOMETRIC = ("tension", "full", "none")

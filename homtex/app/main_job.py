@@ -8,8 +8,16 @@ from pathlib import Path
 
 from ..cells import load_cell
 from ..output.plot import plot_cell
-from .stages import (SPACER_CELL, _markdown_table, cushion_stage, lattice_demo, macro_stage, seamed_stage,
-                     speed_accuracy_stage, unseamed_stage)
+from .stages import (
+    SPACER_CELL,
+    _markdown_table,
+    cushion_stage,
+    lattice_demo,
+    macro_stage,
+    seamed_stage,
+    speed_accuracy_stage,
+    unseamed_stage,
+)
 
 __all__ = ["main_job"]
 

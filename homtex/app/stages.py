@@ -65,12 +65,14 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
     reps = [results[s].report for s in results]
     ds = xr.Dataset(
         {
-            "displacement": (("node", "dof"), r.u, {"units": "mm | rad", "long_name": "nodal displacement and rotation"}),
+            "displacement": (("node", "dof"), r.u,
+                             {"units": "mm | rad", "long_name": "nodal displacement and rotation"}),
             "x": (("node", "xyz"), f.nodes, {"units": "mm", "long_name": "node coordinates"}),
             "axial_force": ("element", r.axial_force, {"units": "N", "long_name": "axial force (tension positive)"}),
             **{f"energy_{k}": ("element", v, {"units": "N mm", "long_name": f"{k} strain energy"})
                for k, v in r.energy.items()},
-            "setup_seconds": ("solver", [p.setup_seconds for p in reps], {"units": "s", "long_name": "solver setup time"}),
+            "setup_seconds": ("solver", [p.setup_seconds for p in reps],
+                              {"units": "s", "long_name": "solver setup time"}),
             "solve_seconds": ("solver", [p.solve_seconds for p in reps], {"units": "s", "long_name": "solve time"}),
             "iterations": ("solver", [p.iterations for p in reps], {"units": "1", "long_name": "CG iterations"}),
             "residual": ("solver", [p.residual for p in reps], {"units": "1", "long_name": "true relative residual"}),
@@ -351,7 +353,8 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
                                        {"units": "mm", "long_name": "punch travel from 20 mm plate distance"})})
     ds.attrs.update(seam_distance_mm=d, cell_seam_distance_mm=float(yarn.attrs["seam_distance_mm"]),
                     yarn_seconds=t_yarn, macro_seconds=t_macro,
-                    speedup=t_yarn / t_macro, max_relative_error=err, yarn_steps=int(steps), yarn_status=yarn.attrs.get("status", "ok"),
+                    speedup=t_yarn / t_macro, max_relative_error=err, yarn_steps=int(steps),
+                    yarn_status=yarn.attrs.get("status", "ok"),
                     stitch_meets_punch_mm=w_hit, max_relative_error_before_stitch_contact=err_pre,
                     pre_stress=str(macro.attrs["pre_stress"]), slack_travel_mm=macro.attrs["slack_travel_mm"],
                     max_relative_error_held=err_law["held"], max_relative_error_released=err_law["released"])

@@ -90,7 +90,7 @@ class ActiveSets:
             seen = {active.tobytes()}
             single = set()          # sets visited after a cycle, changing one contact at a time
             prev = None
-            for inner in range(1, cont.max_iter + 1):
+            for _ in range(1, cont.max_iter + 1):
                 try:
                     self._check_held(rows, active)
                 except SolverError:

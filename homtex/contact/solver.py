@@ -20,6 +20,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
+from ..analysis.static import element_state, prestrain_load
 from ..config import option
 from ..errors import InputError, SolverError
 from ..fem.assembly import Assembler
@@ -27,7 +28,6 @@ from ..linalg.nullspace import rigid_body_modes
 from ..model.frame import Frame
 from ..model.results import ENERGY_KEYS, StaticResult
 from ..model.scene import Scene
-from ..analysis.static import element_state, prestrain_load
 from .activeset import ActiveSets
 from .broad import BroadPhase, exclusion_lists
 from .constraints import ContactSet, build_rows, dedupe_pairs, pair_keys, plate_keys, point_keys

@@ -114,7 +114,6 @@ def yarn_overlaps(frame: Frame, *, tol: float = 1e-9, arc_exclusion: float = 3.0
     """
     x0 = frame.nodes[frame.elements[:, 0]]
     d = frame.element_vectors
-    m = frame.n_elements
     rc = frame.contact_radius
     mid = x0 + 0.5 * d
     k = frame.dim_periodic

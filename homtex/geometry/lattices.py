@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CellError, InputError
-from ..validate import check_keys, get_int, get_list, get_number, get_str
 from ..model.frame import Frame
+from ..validate import check_keys, get_int, get_list, get_number, get_str
 
 
 @dataclass

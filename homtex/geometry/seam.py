@@ -233,7 +233,8 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
     layer = np.r_[np.asarray(cell.info["layer"])[elem_src], np.full(ms, "stitch")]
     info = {
         "generator": "seam", "groups": groups, "layer": layer, "thickness": T,
-        "seam_x": x_s, "seam_y": y_s, "leg_clearance": clearance, "seam_distance": til["seam_distance"], "requested_seam_distance": til["requested"],
+        "seam_x": x_s, "seam_y": y_s, "leg_clearance": clearance, "seam_distance": til["seam_distance"],
+        "requested_seam_distance": til["requested"],
         "stitch_length": s, "stitches": int(stitches), "n_x": til["n_x"], "n_y": til["n_y"],
         "stitch_yarn": sid, "stitch_radius": r_s, "stitch_EA": E_s * math.pi * r_s ** 2,
         "legs": np.r_[np.zeros(m_f, dtype=bool), is_leg],

@@ -18,7 +18,6 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-
 _CHUNK = 256  # block rows per parallel task
 
 

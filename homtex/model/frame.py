@@ -14,7 +14,6 @@ import numpy as np
 from ..errors import InputError
 from .sections import section_properties
 
-
 #: per-element constructor arguments of a Frame, in the order :meth:`Frame.element_fields` returns them
 ELEMENT_FIELDS = ("semi_axes", "E", "nu", "yarn", "ref", "contact_radius", "prestrain", "bending_factor",
                   "torsion_factor")
@@ -153,7 +152,8 @@ class Frame:
             bad = ~(np.isfinite(arr) & (arr > 0))
             if bad.any():
                 e = _first_bad(bad)
-                raise InputError(f"{name} of element {e} (yarn {self.yarn[e]}) must be positive and finite, got {arr[e]}")
+                raise InputError(f"{name} of element {e} (yarn {self.yarn[e]}) must be positive and finite, "
+                                 f"got {arr[e]}")
         bad = ~((self.nu > -1.0) & (self.nu < 0.5))
         if bad.any():
             e = _first_bad(bad)

@@ -1,10 +1,15 @@
-"""Progress display for long work: a rich progress bar when rich is installed, else a line on
-stderr every tenth of the work. One class for studies, compression curves and seam solves."""
+"""Progress of long work: a rich progress bar when rich is installed, else a log line (INFO on
+the ``homtex.progress`` logger) every tenth of the work. One class for studies, compression
+curves and seam solves; the command line shows the log lines."""
 
 from __future__ import annotations
 
-import sys
+import logging
 import time
+
+__all__ = ["Progress"]
+
+log = logging.getLogger(__name__)
 
 
 class Progress:
@@ -21,15 +26,16 @@ class Progress:
         if not enabled:
             return
         try:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress as _Rich, TimeRemainingColumn
+            from rich.progress import BarColumn, MofNCompleteColumn, TimeRemainingColumn
+            from rich.progress import Progress as _Rich
 
             self.bar = _Rich("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                              TimeRemainingColumn(), transient=False)
             self.bar.start()
             self.task = self.bar.add_task(description, total=self.total, completed=self.done)
-        except ImportError:
+        except ImportError:  # rich is an optional extra
             self.bar = None
-            print(f"{description}: {self.done}/{self.total} {unit} done", file=sys.stderr)
+            log.info("%s: %d/%d %s done", description, self.done, self.total, unit)
 
     def step(self, note: str = "") -> None:
         self.done += 1
@@ -40,8 +46,8 @@ class Progress:
             return
         frac = self.done / max(self.total, 1)
         if frac >= self.next_line or self.done == self.total:
-            print(f"  {self.done}/{self.total} {self.unit} ({time.perf_counter() - self.t0:.1f} s)"
-                  + (f" - {note}" if note else ""), file=sys.stderr)
+            log.info("  %s: %d/%d %s (%.1f s)%s", self.description, self.done, self.total, self.unit,
+                     time.perf_counter() - self.t0, f" - {note}" if note else "")
             self.next_line = frac + 0.1
 
     def close(self) -> None:

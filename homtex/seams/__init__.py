@@ -6,8 +6,14 @@ and the analytical beam-on-foundation model (:mod:`homtex.seams.foundation`).
 """
 
 from .compress import seam_compression
-from .foundation import (SLACK_LONG_NAME, calibrate_layer_rigidity, fabric_modulus, foundation_profile,
-                         layer_rigidity, stitch_pull)
+from .foundation import (
+                         SLACK_LONG_NAME,
+                         calibrate_layer_rigidity,
+                         fabric_modulus,
+                         foundation_profile,
+                         layer_rigidity,
+                         stitch_pull,
+)
 from .measure import measure_profile, thread_escape
 from .yarn import SeamSolver, seam_profile, yarn_profile
 

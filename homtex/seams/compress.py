@@ -8,10 +8,12 @@ import logging
 import time
 
 import numpy as np
+import xarray as xr
 
 from ..analysis.static import element_state
 from ..analysis.stepping import StepFailure, flag_force_drops, march
 from ..api import compress
+from ..cells import Cell
 from ..contact.options import Contact
 from ..contact.solver import ContactSolver
 from ..errors import InputError, SolverError
@@ -38,8 +40,9 @@ _META = {"plate_displacement": ("mm", "top plate displacement from first contact
 _STRAIN = ("1", "compression strain (plate displacement / sewn thickness H0)")
 
 
-def seam_compression(cell, *, seam_distance: float | None, strain: float = 0.3, steps: int = 30,
-                     prestrain: float | None = None, contact=None, ramp_steps: int = 4, tension_only: bool = True):
+def seam_compression(cell: Cell, *, seam_distance: float | None, strain: float = 0.3, steps: int = 30,
+                     prestrain: float | None = None, contact: Contact | None = None, ramp_steps: int = 4,
+                     tension_only: bool = True) -> xr.Dataset:
     """Yarn-level compression of a seamed spacer fabric between two rigid plates (paper's Fig. 11).
 
     The seam cell (:func:`homtex.geometry.seam.seam_cell`) is first brought to its sewn state (the

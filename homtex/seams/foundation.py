@@ -43,7 +43,8 @@ from ..contact.options import Contact
 from ..errors import InputError
 from ..model.results import Status
 
-__all__ = ["SLACK_LONG_NAME", "calibrate_layer_rigidity", "fabric_modulus", "foundation_profile", "layer_rigidity", "seam_table",
+__all__ = ["SLACK_LONG_NAME", "calibrate_layer_rigidity", "fabric_modulus", "foundation_profile", "layer_rigidity",
+           "seam_table",
            "stitch_pull"]
 
 SLACK_LONG_NAME = "punch travel at the seam line until the stitch thread is slack (tension / stiffness)"
@@ -138,7 +139,7 @@ def _green(x: np.ndarray, d: float, beta: float, k: float) -> np.ndarray:
 
 
 def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = None, points: int = 121,
-                       exact_wales: bool = False):
+                       exact_wales: bool = False) -> xr.Dataset:
     """Cushion profile from the ANALYTICAL foundation model (``seam_profile(method="foundation")``).
 
     ``[parameters.seam] foundation_prestrain`` is the machine's needle-thread tension read as a
@@ -213,7 +214,8 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
     h = H - 2.0 * P * _green(x, d, beta, k)
     ds = xr.Dataset(
         {"height": ("x", h, {"units": "mm", "long_name": "fabric (cushion) height"}),
-         "cushion_height": ((), float(h.max()), {"units": "mm", "long_name": "cushion height (max height between seams)"}),
+         "cushion_height": ((), float(h.max()),
+                            {"units": "mm", "long_name": "cushion height (max height between seams)"}),
          "seam_height": ((), float(hs), {"units": "mm", "long_name": "height at the seam line"}),
          "stitch_force": ((), float(P), {"units": "N", "long_name": "stitch pull per stitch and layer"}),
          "slack_travel": ((), float(slack), {"units": "mm", "long_name": SLACK_LONG_NAME}),

@@ -21,6 +21,7 @@ import xarray as xr
 
 from ..analysis.nonlinear import Corotational
 from ..analysis.stepping import StepFailure, march
+from ..cells import Cell
 from ..config import option
 from ..contact.newton import newton_contact
 from ..contact.options import Contact
@@ -153,10 +154,10 @@ class SeamSolver:
         return self.history
 
 
-def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, steps: int = 4,
+def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = None, steps: int = 4,
                  stitches: int = 1, exact: bool = False, contact=None, elements_per_mm: float | None = None,
                  leg_elements: int | None = None, max_cuts: int = 4, geometry: str = "linear",
-                 stabilize: float = 0.0):
+                 stabilize: float = 0.0) -> xr.Dataset:
     """Cushion profile from the yarn-level seam cell (``seam_profile(method="yarn")``).
 
     Parameters
@@ -222,7 +223,8 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
     d_eff = float(info["seam_distance"])
     ds = xr.Dataset(
         {"height": ("x", h, {"units": "mm", "long_name": "cushion height (outer yarn surfaces, per wale bin)"}),
-         "cushion_height": ((), float(np.max(h)), {"units": "mm", "long_name": "cushion height (max height between seams)"}),
+         "cushion_height": ((), float(np.max(h)),
+                            {"units": "mm", "long_name": "cushion height (max height between seams)"}),
          "seam_height": ((), float(h[i0]), {"units": "mm", "long_name": "height at the seam line"}),
          "stitch_force": ((), N_leg, {"units": "N", "long_name": "axial force of a stitch leg (two thread strands)"}),
          "slack_travel": ((), slack, {"units": "mm", "long_name": SLACK_LONG_NAME}),
@@ -246,7 +248,8 @@ def yarn_profile(cell, *, seam_distance: float, prestrain: float | None = None, 
     return set_status(ds, status, detail)
 
 
-def seam_profile(cell, *, seam_distance: float, prestrain: float | None = None, method: str = "yarn", **options):
+def seam_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = None, method: str = "yarn",
+                 **options) -> xr.Dataset:
     """Cushion profile of a spacer fabric with parallel lock-stitch seams.
 
     Parameters

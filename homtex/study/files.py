@@ -197,7 +197,8 @@ def sample_points(sampling: dict) -> tuple[list, np.ndarray]:
     names = list(bounds)
     lo, hi = [], []
     for k, b in bounds.items():
-        if (not isinstance(b, list) or len(b) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in b)
+        if (not isinstance(b, list) or len(b) != 2
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in b)
                 or not b[0] < b[1]):
             raise StudyError(f"must be [lo, hi] with lo < hi, got {b!r}", table="sampling.bounds", key=k)
         lo.append(float(b[0]))

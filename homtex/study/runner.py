@@ -195,7 +195,7 @@ class _Progress(Progress):
 
 # ------------------------------------------------------------------------------------ runner
 def run_study(path, out_dir, *, scheduler=None, workers: int | None = None, progress: bool = True,
-              max_points: int | None = None, retry_failed: bool = False):
+              max_points: int | None = None, retry_failed: bool = False) -> xr.Dataset:
     """Run (or resume) a study and return its Dataset; writes ``out_dir/result.nc``.
 
     Parameters
