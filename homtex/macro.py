@@ -36,7 +36,7 @@ thread keeps its pull; the punch force rises continuously from zero, as the meas
 do) and "released" (delta_s -> 0: a stiff thread with a small tension goes slack at once).
 The yarn-level seam cell of cells/spacer_20mm.toml is of the second kind (d = 24 mm: legs of
 1.8 N, delta_s = 0.09 mm; against it "thread" is 8 % off to 30 % compression, "held" 16 %,
-README), the fitted foundation seams slacken after 0.50-0.57 mm.
+docs/main_job.md), the fitted foundation seams slacken after 0.50-0.57 mm.
 Rescaling the law to the local height (sigma_u(1 - z/h)) was rejected: it treats a
 pre-compressed column as fresh fabric, with straight pile yarns it no longer has.
 

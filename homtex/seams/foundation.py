@@ -226,7 +226,7 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
                     "forces; eps0 = the machine's needle-thread tension (assumption), layer rigidity "
                     "calibrated once on d = 24 mm",
                     validity="cushion heights: calibrated at d = 24 mm (14.33 mm), other d are predictions of "
-                    "this model; eps0 = 0.40 is the paper's machine setting read as a strain (README 'Seams')",
+                    "this model; eps0 = 0.40 is the paper's machine setting read as a strain (docs/seams.md)",
                     status="ok", effective_seam_distance_mm=d,
                     seam_distance_mm=d, stitch_length_mm=s, thickness_mm=H, foundation_modulus_MPa=Ec,
                     layer_rigidity_Nmm2=D, beta_per_mm=beta, stitch_EA_N=EA)

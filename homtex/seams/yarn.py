@@ -235,7 +235,7 @@ def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
         model="yarn", method="yarn",
         validity="the yarn-level seam dips only locally (decay length ~2.6 mm): the cushion stays near the "
         "fabric thickness and does NOT reproduce measured cushion heights; eps0 is a nominal value, not "
-        "calibrated (README 'Seams'; method='foundation' is the calibrated model)",
+        "calibrated (docs/seams.md; method='foundation' is the calibrated model)",
         description="yarn-level seam cell (lock stitch 301, pre-strained stitch yarn, yarn-yarn contact; "
         + ("co-rotational beams, Newton iterations per load step)" if geometry == "nonlinear" else
            "geometrically linear beams, contact re-linearised per load step)"), geometry=geometry,
