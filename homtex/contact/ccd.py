@@ -35,7 +35,7 @@ from numba import njit, prange
 
 from ..errors import InputError
 from .distance import _ee_d2
-from .potential import PairStencil, _chunks, _load_stencil, _plate_args, _plates, _positions
+from .potential import PairStencil, _chunks, _load_stencil, _parallel, _plate_args, _plates, _positions
 
 log = logging.getLogger(__name__)
 
@@ -82,19 +82,31 @@ def _accd(P, dP, xi, eta, rtol, tmax, max_iter, Q):
     return t, max_iter
 
 
+@njit(cache=True)
+def _pair_bounds_chunk(x, dx, nodes, shift, rsum, eta, rtol, tmax, max_iter, use_radii, lo, hi, toi, iters):
+    P = np.empty((4, 3))
+    dP = np.empty((4, 3))
+    Q = np.empty((4, 3))
+    for q in range(lo, hi):
+        _load_stencil(x, nodes, shift, q, P)
+        for k in range(4):
+            for i in range(3):
+                dP[k, i] = dx[nodes[q, k], i]
+        toi[q], iters[q] = _accd(P, dP, rsum[q] if use_radii else 0.0, eta, rtol, tmax, max_iter, Q)
+
+
+@njit(cache=True)
+def _pair_bounds_ser(x, dx, nodes, shift, rsum, eta, rtol, tmax, max_iter, use_radii, toi, iters):
+    _pair_bounds_chunk(x, dx, nodes, shift, rsum, eta, rtol, tmax, max_iter, use_radii, 0, nodes.shape[0],
+                       toi, iters)
+
+
 @njit(cache=True, parallel=True)
-def _pair_bounds(x, dx, nodes, shift, rsum, eta, rtol, tmax, max_iter, use_radii, nch, toi, iters):
+def _pair_bounds_par(x, dx, nodes, shift, rsum, eta, rtol, tmax, max_iter, use_radii, nch, toi, iters):
     c = nodes.shape[0]
     for ch in prange(nch):
-        P = np.empty((4, 3))
-        dP = np.empty((4, 3))
-        Q = np.empty((4, 3))
-        for q in range(ch * c // nch, (ch + 1) * c // nch):
-            _load_stencil(x, nodes, shift, q, P)
-            for k in range(4):
-                for i in range(3):
-                    dP[k, i] = dx[nodes[q, k], i]
-            toi[q], iters[q] = _accd(P, dP, rsum[q] if use_radii else 0.0, eta, rtol, tmax, max_iter, Q)
+        _pair_bounds_chunk(x, dx, nodes, shift, rsum, eta, rtol, tmax, max_iter, use_radii, ch * c // nch,
+                           (ch + 1) * c // nch, toi, iters)
 
 
 def _check_eta(eta):
@@ -127,8 +139,12 @@ def pair_step_bound(x, dx, stencil: PairStencil, eta: float = 0.1, rtol: float =
     toi = np.ones(c)
     iters = np.zeros(c, dtype=np.int64)
     if c:
-        _pair_bounds(x, dx, stencil.nodes, stencil.shift, stencil.rsum, float(eta), float(rtol), 1.0,
-                     int(max_iter), bool(use_radii), _chunks(c), toi, iters)
+        args = (x, dx, stencil.nodes, stencil.shift, stencil.rsum, float(eta), float(rtol), 1.0, int(max_iter),
+                bool(use_radii))
+        if _parallel(c, "gaps"):
+            _pair_bounds_par(*args, _chunks(c), toi, iters)
+        else:
+            _pair_bounds_ser(*args, toi, iters)
     alpha = float(toi.min()) if c else 1.0
     if c and iters.max() >= max_iter:
         log.debug("pair_step_bound: %d pairs hit max_iter=%d (bound stays safe, may be small)",

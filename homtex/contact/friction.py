@@ -34,8 +34,8 @@ from numba import njit, prange
 
 from ..errors import InputError
 from .distance import _d2_at, _ee_classify, _sin2_angle
-from .potential import (Enforcement, PairStencil, _blend, _chunks, _load_stencil, _phi, _plate_args,
-                        _plates, _positions, _project_psd, _term_params, _term_weights, pair_gaps)
+from .potential import (Enforcement, PairStencil, _blend, _chunks, _load_stencil, _parallel, _phi,
+                        _plate_args, _plates, _positions, _project_psd, _term_params, _term_weights, pair_gaps)
 
 log = logging.getLogger(__name__)
 
@@ -86,110 +86,126 @@ def _basis(nx, ny, nz, T, j):
     T[j, 2, 1] = nx * t1y - ny * t1x
 
 
-@njit(cache=True, parallel=True)
-def _pair_lag(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, nch, lam, coef, T):
-    """Lagged terms of active pairs idx: lam (na, 9), coef (na, 9, 4), T (na, 9, 3, 2)."""
-    na = idx.size
-    for ch in prange(nch):
-        P = np.empty((4, 3))
-        gc = np.empty(12)
-        Hc = np.empty((1, 1))
-        for r in range(ch * na // nch, (ch + 1) * na // nch):
-            q = idx[r]
-            _load_stencil(x, nodes, shift, q, P)
-            d2e, es, et, ecase = _ee_classify(P)
-            w, w1, w2 = _blend(_sin2_angle(P, gc, Hc, 0), c0, c1)
-            for j in range(9):
-                lam[r, j] = 0.0
-                W, Wp = _term_weights(j, w, alpha[q], beta[q])
-                if W == 0.0:
-                    continue
-                s, t, fs, ft = _term_params(P, j, es, et, ecase)
-                d = np.sqrt(_d2_at(P, s, t))
-                if d - rsum[q] >= ghat or d <= 0.0:
-                    continue
-                e, e1, e2 = _phi(d - rsum[q], kind, kappa, ghat)
-                lam[r, j] = -W * e1
-                coef[r, j, 0] = 1.0 - s
-                coef[r, j, 1] = s
-                coef[r, j, 2] = -(1.0 - t)
-                coef[r, j, 3] = -t
-                nx = ny = nz = 0.0
-                for k in range(4):
-                    nx += coef[r, j, k] * P[k, 0]
-                    ny += coef[r, j, k] * P[k, 1]
-                    nz += coef[r, j, k] * P[k, 2]
-                _basis(nx / d, ny / d, nz / d, T[r], j)
+@njit(cache=True)
+def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, lo, hi, lam, coef, T):
+    """Lagged terms of active pairs idx[lo:hi]: lam (na, 9), coef (na, 9, 4), T (na, 9, 3, 2)."""
+    P = np.empty((4, 3))
+    gc = np.empty(12)
+    Hc = np.empty((1, 1))
+    for r in range(lo, hi):
+        q = idx[r]
+        _load_stencil(x, nodes, shift, q, P)
+        d2e, es, et, ecase = _ee_classify(P)
+        w, w1, w2 = _blend(_sin2_angle(P, gc, Hc, 0), c0, c1)
+        for j in range(9):
+            lam[r, j] = 0.0
+            W, Wp = _term_weights(j, w, alpha[q], beta[q])
+            if W == 0.0:
+                continue
+            s, t, fs, ft = _term_params(P, j, es, et, ecase)
+            d = np.sqrt(_d2_at(P, s, t))
+            if d - rsum[q] >= ghat or d <= 0.0:
+                continue
+            e, e1, e2 = _phi(d - rsum[q], kind, kappa, ghat)
+            lam[r, j] = -W * e1
+            coef[r, j, 0] = 1.0 - s
+            coef[r, j, 1] = s
+            coef[r, j, 2] = -(1.0 - t)
+            coef[r, j, 3] = -t
+            nx = ny = nz = 0.0
+            for k in range(4):
+                nx += coef[r, j, k] * P[k, 0]
+                ny += coef[r, j, k] * P[k, 1]
+                nz += coef[r, j, k] * P[k, 2]
+            _basis(nx / d, ny / d, nz / d, T[r], j)
 
 
-@njit(cache=True, parallel=True)
-def _friction_eval(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, nch,
-                   e_out, dis_out, slip_out, g_out, H_out):
+@njit(cache=True)
+def _pair_lag(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, lam, coef, T):
+    _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, 0, idx.size, lam, coef, T)
+
+
+@njit(cache=True)
+def _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, lo, hi,
+                    e_out, dis_out, slip_out, g_out, H_out):
     """Friction energy, dissipation, slips, gradient (np, 3S) and Hessian (np, 3S, 3S)."""
-    npair = nodes.shape[0]
     S = nodes.shape[1]
     J = lam.shape[1]
     B = 3 * S
-    for ch in prange(nch):
-        d = np.empty(3)
-        Hl = np.empty((B, B))
-        for r in range(ch * npair // nch, (ch + 1) * npair // nch):
-            E = 0.0
-            dis = 0.0
-            neg = False
-            for i in range(B):
-                g_out[r, i] = 0.0
-                if hess:
-                    for m in range(B):
-                        Hl[i, m] = 0.0
-            for j in range(J):
-                lj = lam[r, j]
-                slip_out[r, j] = 0.0
-                if lj == 0.0:
-                    continue
-                if lj < 0.0:
-                    neg = True
-                for i in range(3):
-                    d[i] = -dref[r, i]
-                for k in range(S):
-                    ck = coef[r, j, k]
-                    nd = nodes[r, k]
-                    for i in range(3):
-                        d[i] += ck * (x[nd, i] - x0[nd, i])
-                u0 = T[r, j, 0, 0] * d[0] + T[r, j, 1, 0] * d[1] + T[r, j, 2, 0] * d[2]
-                u1 = T[r, j, 0, 1] * d[0] + T[r, j, 1, 1] * d[1] + T[r, j, 2, 1] * d[2]
-                y = np.sqrt(u0 * u0 + u1 * u1)
-                f0, f1y, f2 = _mollifier(y, eps)
-                ml = mu[r] * lj
-                E += ml * f0
-                dis += ml * (f0 - eps / 3.0)
-                slip_out[r, j] = y
-                # tangential force direction in 3D: T u
-                v0 = T[r, j, 0, 0] * u0 + T[r, j, 0, 1] * u1
-                v1 = T[r, j, 1, 0] * u0 + T[r, j, 1, 1] * u1
-                v2 = T[r, j, 2, 0] * u0 + T[r, j, 2, 1] * u1
-                for k in range(S):
-                    a = ml * f1y * coef[r, j, k]
-                    g_out[r, 3 * k] += a * v0
-                    g_out[r, 3 * k + 1] += a * v1
-                    g_out[r, 3 * k + 2] += a * v2
-                if hess:
-                    # 3 x 3 core: f1/y T T^T + f2 (T u)(T u)^T
-                    for i in range(3):
-                        vi = v0 if i == 0 else (v1 if i == 1 else v2)
-                        for m in range(3):
-                            vm = v0 if m == 0 else (v1 if m == 1 else v2)
-                            core = ml * (f1y * (T[r, j, i, 0] * T[r, j, m, 0] + T[r, j, i, 1] * T[r, j, m, 1])
-                                         + f2 * vi * vm)
-                            for k in range(S):
-                                for l in range(S):
-                                    Hl[3 * k + i, 3 * l + m] += coef[r, j, k] * coef[r, j, l] * core
-            e_out[r] = E
-            dis_out[r] = dis
+    d = np.empty(3)
+    Hl = np.empty((B, B))
+    for r in range(lo, hi):
+        E = 0.0
+        dis = 0.0
+        neg = False
+        for i in range(B):
+            g_out[r, i] = 0.0
             if hess:
-                if project and neg:
-                    _project_psd(Hl)
-                H_out[r] = Hl
+                for m in range(B):
+                    Hl[i, m] = 0.0
+        for j in range(J):
+            lj = lam[r, j]
+            slip_out[r, j] = 0.0
+            if lj == 0.0:
+                continue
+            if lj < 0.0:
+                neg = True
+            for i in range(3):
+                d[i] = -dref[r, i]
+            for k in range(S):
+                ck = coef[r, j, k]
+                nd = nodes[r, k]
+                for i in range(3):
+                    d[i] += ck * (x[nd, i] - x0[nd, i])
+            u0 = T[r, j, 0, 0] * d[0] + T[r, j, 1, 0] * d[1] + T[r, j, 2, 0] * d[2]
+            u1 = T[r, j, 0, 1] * d[0] + T[r, j, 1, 1] * d[1] + T[r, j, 2, 1] * d[2]
+            y = np.sqrt(u0 * u0 + u1 * u1)
+            f0, f1y, f2 = _mollifier(y, eps)
+            ml = mu[r] * lj
+            E += ml * f0
+            dis += ml * (f0 - eps / 3.0)
+            slip_out[r, j] = y
+            # tangential force direction in 3D: T u
+            v0 = T[r, j, 0, 0] * u0 + T[r, j, 0, 1] * u1
+            v1 = T[r, j, 1, 0] * u0 + T[r, j, 1, 1] * u1
+            v2 = T[r, j, 2, 0] * u0 + T[r, j, 2, 1] * u1
+            for k in range(S):
+                a = ml * f1y * coef[r, j, k]
+                g_out[r, 3 * k] += a * v0
+                g_out[r, 3 * k + 1] += a * v1
+                g_out[r, 3 * k + 2] += a * v2
+            if hess:
+                # 3 x 3 core: f1/y T T^T + f2 (T u)(T u)^T
+                for i in range(3):
+                    vi = v0 if i == 0 else (v1 if i == 1 else v2)
+                    for m in range(3):
+                        vm = v0 if m == 0 else (v1 if m == 1 else v2)
+                        core = ml * (f1y * (T[r, j, i, 0] * T[r, j, m, 0] + T[r, j, i, 1] * T[r, j, m, 1])
+                                     + f2 * vi * vm)
+                        for k in range(S):
+                            for l in range(S):
+                                Hl[3 * k + i, 3 * l + m] += coef[r, j, k] * coef[r, j, l] * core
+        e_out[r] = E
+        dis_out[r] = dis
+        if hess:
+            if project and neg:
+                _project_psd(Hl)
+            H_out[r] = Hl
+
+
+@njit(cache=True)
+def _friction_ser(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, e_out, dis_out, slip_out, g_out, H_out):
+    _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, 0, nodes.shape[0],
+                    e_out, dis_out, slip_out, g_out, H_out)
+
+
+@njit(cache=True, parallel=True)
+def _friction_par(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, nch,
+                  e_out, dis_out, slip_out, g_out, H_out):
+    npair = nodes.shape[0]
+    for ch in prange(nch):
+        _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, ch * npair // nch,
+                        (ch + 1) * npair // nch, e_out, dis_out, slip_out, g_out, H_out)
 
 
 @njit(cache=True)
@@ -295,8 +311,7 @@ def pair_friction_lag(x_lag, stencil: PairStencil, enforcement: Enforcement, mu=
             raise InputError("x_lag: a pair's gap is <= 0, where the barrier is infinite")
         c0, c1 = enforcement.c_range
         _pair_lag(x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
-                  enforcement.code, float(enforcement.kappa), float(enforcement.ghat), c0, c1, _chunks(na),
-                  lam, coef, T)
+                  enforcement.code, float(enforcement.kappa), float(enforcement.ghat), c0, c1, lam, coef, T)
     return FrictionLag(nodes=stencil.nodes[idx], coef=coef, basis=T, lam=lam, mu=mu_c[idx], index=idx,
                        plate=np.full(na, -1, dtype=np.int64))
 
@@ -353,8 +368,11 @@ def friction_potential(lag: FrictionLag, x, x_start, eps_v: float, plate_motion=
     g = np.zeros((npair, 3 * S))
     H = np.zeros((npair, 3 * S, 3 * S)) if hessian else np.zeros((0, 3 * S, 3 * S))
     if npair:
-        _friction_eval(x, x0, lag.nodes, lag.coef, lag.basis, lag.lam, lag.mu, dref, float(eps_v), hessian,
-                       project, _chunks(npair), e, dis, slip, g, H)
+        args = (x, x0, lag.nodes, lag.coef, lag.basis, lag.lam, lag.mu, dref, float(eps_v), hessian, project)
+        if _parallel(npair, "eval"):
+            _friction_par(*args, _chunks(npair), e, dis, slip, g, H)
+        else:
+            _friction_ser(*args, e, dis, slip, g, H)
     grad = np.zeros_like(x)
     _scatter_rows(lag.nodes, g, grad)
     pf = np.zeros((nplates, 3))

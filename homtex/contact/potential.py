@@ -270,42 +270,66 @@ def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, 
     return E, lam, gap_ee
 
 
+@njit(cache=True)
+def _pair_gaps_chunk(x, nodes, shift, rsum, lo, hi, gap):
+    P = np.empty((4, 3))
+    for q in range(lo, hi):
+        _load_stencil(x, nodes, shift, q, P)
+        d2, s, t, case = _ee_classify(P)
+        gap[q] = np.sqrt(d2) - rsum[q]
+
+
+@njit(cache=True)
+def _pair_gaps_ser(x, nodes, shift, rsum, gap):
+    """Segment-segment gap of every pair (values only)."""
+    _pair_gaps_chunk(x, nodes, shift, rsum, 0, nodes.shape[0], gap)
+
+
 @njit(cache=True, parallel=True)
-def _pair_gaps(x, nodes, shift, rsum, nch, gap):
-    """Segment-segment gap of every pair (values only), in ``nch`` chunks."""
+def _pair_gaps_par(x, nodes, shift, rsum, nch, gap):
     c = nodes.shape[0]
     for ch in prange(nch):
-        P = np.empty((4, 3))
-        for q in range(ch * c // nch, (ch + 1) * c // nch):
-            _load_stencil(x, nodes, shift, q, P)
-            d2, s, t, case = _ee_classify(P)
-            gap[q] = np.sqrt(d2) - rsum[q]
+        _pair_gaps_chunk(x, nodes, shift, rsum, ch * c // nch, (ch + 1) * c // nch, gap)
+
+
+@njit(cache=True)
+def _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+                     lo, hi, e_out, lam_out, g_out, H_out):
+    P = np.empty((4, 3))
+    tg = np.empty(12)
+    tH = np.empty((12, 12))
+    gc = np.empty(12)
+    Hc = np.empty((12, 12))
+    Gp = np.empty(12)
+    Hl = np.empty((12, 12))
+    for r in range(lo, hi):
+        q = idx[r]
+        _load_stencil(x, nodes, shift, q, P)
+        E, lam, gap = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kappa, ghat, c0, c1, hess,
+                                   g_out[r], Hl, tg, tH, gc, Hc, Gp)
+        e_out[r] = E
+        lam_out[r] = lam
+        if hess:
+            if project:
+                _project_psd(Hl)
+            H_out[r] = Hl
+
+
+@njit(cache=True)
+def _pair_eval_ser(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+                   e_out, lam_out, g_out, H_out):
+    """Energy, net normal force, gradient (na, 12) and Hessian (na, 12, 12) of pairs idx."""
+    _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+                     0, idx.size, e_out, lam_out, g_out, H_out)
 
 
 @njit(cache=True, parallel=True)
-def _pair_eval(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project, nch,
-               e_out, lam_out, g_out, H_out):
-    """Energy, net normal force, gradient (na, 12) and Hessian (na, 12, 12) of pairs idx."""
+def _pair_eval_par(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project, nch,
+                   e_out, lam_out, g_out, H_out):
     na = idx.size
     for ch in prange(nch):
-        P = np.empty((4, 3))
-        tg = np.empty(12)
-        tH = np.empty((12, 12))
-        gc = np.empty(12)
-        Hc = np.empty((12, 12))
-        Gp = np.empty(12)
-        Hl = np.empty((12, 12))
-        for r in range(ch * na // nch, (ch + 1) * na // nch):
-            q = idx[r]
-            _load_stencil(x, nodes, shift, q, P)
-            E, lam, gap = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kappa, ghat, c0, c1, hess,
-                                       g_out[r], Hl, tg, tH, gc, Hc, Gp)
-            e_out[r] = E
-            lam_out[r] = lam
-            if hess:
-                if project:
-                    _project_psd(Hl)
-                H_out[r] = Hl
+        _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+                         ch * na // nch, (ch + 1) * na // nch, e_out, lam_out, g_out, H_out)
 
 
 @njit(cache=True)
@@ -429,9 +453,18 @@ class ContactEval:
         return float(self.gap.min()) if len(self.gap) else np.inf
 
 
+# below this many items a kernel runs serially: a parallel region costs little on an idle machine but
+# waits for every thread, which takes a scheduler slice (~ms) when other work shares the cores
+PARALLEL_MIN = {"gaps": 20000, "eval": 2000}
+
+
 def _chunks(n):
     """Number of work chunks for n items (a few per thread; one per item when few)."""
     return max(1, min(n, 4 * numba.get_num_threads()))
+
+
+def _parallel(n, key):
+    return numba.get_num_threads() > 1 and n >= PARALLEL_MIN[key]
 
 
 def _positions(x, n_min=None):
@@ -450,7 +483,11 @@ def pair_gaps(x, stencil: PairStencil) -> np.ndarray:
     x = _positions(x, int(stencil.nodes.max()) + 1 if len(stencil) else None)
     gap = np.empty(len(stencil))
     if len(stencil):
-        _pair_gaps(x, stencil.nodes, stencil.shift, stencil.rsum, _chunks(len(stencil)), gap)
+        args = (x, stencil.nodes, stencil.shift, stencil.rsum)
+        if _parallel(len(stencil), "gaps"):
+            _pair_gaps_par(*args, _chunks(len(stencil)), gap)
+        else:
+            _pair_gaps_ser(*args, gap)
     return gap
 
 
@@ -466,9 +503,13 @@ def pair_potential(x, stencil: PairStencil, enforcement: Enforcement, hessian: b
     H = np.zeros((na, 12, 12)) if hessian else np.zeros((0, 12, 12))
     c0, c1 = enforcement.c_range
     if na:
-        _pair_eval(x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
-                   enforcement.code, float(enforcement.kappa), float(enforcement.ghat), c0, c1, hessian,
-                   bool(enforcement.project), _chunks(na), e, lam_a, g, H)
+        args = (x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
+                enforcement.code, float(enforcement.kappa), float(enforcement.ghat), c0, c1, hessian,
+                bool(enforcement.project))
+        if _parallel(na, "eval"):
+            _pair_eval_par(*args, _chunks(na), e, lam_a, g, H)
+        else:
+            _pair_eval_ser(*args, e, lam_a, g, H)
     grad = np.zeros_like(x)
     energy = float(e.sum())
     if np.isfinite(energy):
