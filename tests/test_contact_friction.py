@@ -62,6 +62,20 @@ def test_pair_friction_derivatives(scale, rng):
     assert np.abs(ev.grad.sum(axis=0)).max() < 1e-14      # action = reaction
 
 
+def test_projected_pair_friction_hessian_is_psd(rng):
+    """Near a node the inclusion-exclusion gives negative terms: project=True drops them from
+    the Hessian (PSD), the gradient stays exact."""
+    P = np.array([[0, 0, 0], [1, 0, 0], [0.97, -0.5, 0.205], [1.02, 0.5, 0.206]])
+    st = pair_stencil(EL2, [0.1, 0.1], [0], [1], degree=np.array([2, 2, 2, 2]))
+    lag = pair_friction_lag(P, st, ENF, mu=0.4)
+    assert (lag.lam < 0).any()
+    x = P + rng.normal(scale=5e-4, size=P.shape)
+    ex, ep = (friction_potential(lag, x, P, 1e-3, project=p) for p in (False, True))
+    assert np.array_equal(ex.grad, ep.grad) and ex.energy == ep.energy
+    assert np.linalg.eigvalsh(ep.hess[0]).min() > -1e-12 * np.abs(ep.hess[0]).max()
+    assert np.linalg.eigvalsh(ep.hess[0] - ex.hess[0]).min() > -1e-12 * np.abs(ep.hess[0]).max()
+
+
 def test_coulomb_force_sliding_and_sticking_on_a_plate():
     x0 = np.array([[0.0, 0.0, 0.105]])
     lag = plate_friction_lag(x0, [0], 0.1, [0, 0, 0], [0, 0, 1], ENF, mu=0.3)

@@ -141,7 +141,7 @@ def pair_step_bound(x, dx, stencil: PairStencil, eta: float = 0.1, rtol: float =
     if c:
         args = (x, dx, stencil.nodes, stencil.shift, stencil.rsum, float(eta), float(rtol), 1.0, int(max_iter),
                 bool(use_radii))
-        if _parallel(c, "gaps"):
+        if _parallel(c, "ccd"):
             _pair_bounds_par(*args, _chunks(c), toi, iters)
         else:
             _pair_bounds_ser(*args, toi, iters)

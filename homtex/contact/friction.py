@@ -17,7 +17,9 @@ mu lambda against the slip (sliding), below it a stiff elastic stick of at most 
 The force is -grad D; the Hessian of one contact, mu lambda c c^T (x) T M T^T with
 M = f1(y)/y I + (f1'(y) y - f1(y))/y^3 u u^T, is positive semi-definite (f0(|u|) is convex
 and the slip linear in x). Pair terms carry the signed weights of the contact potential's
-inclusion-exclusion (:mod:`.potential`), so a pair's block is projected to PSD on request.
+inclusion-exclusion (:mod:`.potential`): a negative term cancels a positive one of a neighbouring
+pair at the same point, so ``project=True`` leaves the negative terms out of the Hessian (a PSD
+block, stiffer than the exact one by at most the cancelled terms; the gradient stays exact).
 
 The energy friction dissipates over a step is the work of its forces along the straight path
 from x_start to x: sum_j mu_j lambda_j (f0(|u_j|) - eps / 3), i.e. mu lambda (s - eps/3) for a
@@ -35,7 +37,7 @@ from numba import njit, prange
 from ..errors import InputError
 from .distance import _d2_at, _ee_classify, _sin2_angle
 from .potential import (Enforcement, PairStencil, _blend, _chunks, _load_stencil, _parallel, _phi,
-                        _plate_args, _plates, _positions, _project_psd, _term_params, _term_weights, pair_gaps)
+                        _plate_args, _plates, _positions, _term_params, _term_weights, pair_gaps)
 
 log = logging.getLogger(__name__)
 
@@ -137,7 +139,6 @@ def _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, lo
     for r in range(lo, hi):
         E = 0.0
         dis = 0.0
-        neg = False
         for i in range(B):
             g_out[r, i] = 0.0
             if hess:
@@ -148,8 +149,9 @@ def _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, lo
             slip_out[r, j] = 0.0
             if lj == 0.0:
                 continue
-            if lj < 0.0:
-                neg = True
+            # a negative (inclusion-exclusion) term cancels a positive one of a neighbouring pair
+            # at the same point; projecting, its Hessian is left out (each kept one is PSD)
+            skip_h = project and lj < 0.0
             for i in range(3):
                 d[i] = -dref[r, i]
             for k in range(S):
@@ -174,7 +176,7 @@ def _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, lo
                 g_out[r, 3 * k] += a * v0
                 g_out[r, 3 * k + 1] += a * v1
                 g_out[r, 3 * k + 2] += a * v2
-            if hess:
+            if hess and not skip_h:
                 # 3 x 3 core: f1/y T T^T + f2 (T u)(T u)^T
                 for i in range(3):
                     vi = v0 if i == 0 else (v1 if i == 1 else v2)
@@ -188,8 +190,6 @@ def _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, lo
         e_out[r] = E
         dis_out[r] = dis
         if hess:
-            if project and neg:
-                _project_psd(Hl)
             H_out[r] = Hl
 
 

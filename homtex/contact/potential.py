@@ -455,7 +455,7 @@ class ContactEval:
 
 # below this many items a kernel runs serially: a parallel region costs little on an idle machine but
 # waits for every thread, which takes a scheduler slice (~ms) when other work shares the cores
-PARALLEL_MIN = {"gaps": 20000, "eval": 2000}
+PARALLEL_MIN = {"gaps": 200000, "ccd": 20000, "eval": 2000}
 
 
 def _chunks(n):
