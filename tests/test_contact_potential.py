@@ -207,7 +207,8 @@ def energy_grad(st, enf):
 
 def tilted(angle_deg, z=0.21, x0=0.3, lift=0.1):
     th = np.radians(angle_deg)
-    return np.array([[0, 0, 0], [1, 0, 0], [x0, 0, z], [x0 + np.cos(th), 0.7 * np.sin(th), z + lift * 0.7 * np.sin(th)]])
+    b1 = [x0 + np.cos(th), 0.7 * np.sin(th), z + lift * 0.7 * np.sin(th)]
+    return np.array([[0, 0, 0], [1, 0, 0], [x0, 0, z], b1])
 
 
 @pytest.mark.parametrize("kind,kappa,h", [("penalty", 100.0, 1e-6), ("barrier", 1.0, 1e-7)])

@@ -125,7 +125,8 @@ def pair_step_bound(x, dx, stencil: PairStencil, eta: float = 0.1, rtol: float =
         the step (see :func:`step_candidates`).
     eta : keep each gap >= eta x its starting value (0 <= eta < 1).
     rtol : stop refining a pair once its gap is within rtol of the way to the target.
-    use_radii : measure gaps from the yarn surfaces (True) or the centre lines (False).
+    use_radii : measure gaps from the yarn surfaces (True: a barrier) or the centre lines (False:
+        a penalty, which must be free to penetrate but not to pass through).
     return_pairs : also return each pair's bound and its iterations.
 
     Returns alpha (float), or (alpha, toi (c,), iterations (c,)).
@@ -153,11 +154,12 @@ def pair_step_bound(x, dx, stencil: PairStencil, eta: float = 0.1, rtol: float =
 
 
 def plate_step_bound(x, dx, nodes, radius, origin, normal, plate=0, plate_motion=None, eta: float = 0.1,
-                     return_nodes: bool = False):
+                     use_radii: bool = True, return_nodes: bool = False):
     """Largest step alpha in [0, 1] keeping every node's plate gap >= eta x its starting value.
 
     ``plate_motion`` (P, 3): the plates' motion along the same step (mm). Gaps are linear in
-    alpha, so the bound is exact. A node that starts with a gap <= 0 is held to its centre
+    alpha, so the bound is exact. A node that starts with a gap <= 0 (or every node, with
+    ``use_radii=False``: a penalty, which must be free to penetrate) is held to its centre
     (thickness 0); one whose centre is already beyond the plane does not limit the step.
     """
     x = _positions(x)
@@ -168,7 +170,7 @@ def plate_step_bound(x, dx, nodes, radius, origin, normal, plate=0, plate_motion
     dpl = np.zeros((len(o), 3)) if plate_motion is None else np.asarray(plate_motion, dtype=float).reshape(-1, 3)
     n = nr[plate]
     dist = np.einsum("ij,ij->i", x[nodes] - o[plate], n)
-    g0 = dist - radius
+    g0 = dist - radius if use_radii else dist
     g0 = np.where(g0 > 0, g0, dist)                  # penetrating start: centre line
     rate = np.einsum("ij,ij->i", dx[nodes] - dpl[plate], n)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -578,12 +578,12 @@ def plate_potential(x, nodes, radius, origin, normal, enforcement: Enforcement, 
     nvec = nr[plate[idx]]
     grad = np.zeros_like(x)
     energy = float(e.sum())
-    if np.isfinite(energy):
-        np.add.at(grad, nodes[idx], e1[:, None] * nvec)
     lam = np.zeros(len(nodes))
     lam[idx] = -e1
     pf = np.zeros((len(o), 3))
-    np.add.at(pf, plate[idx], e1[:, None] * nvec)
+    if np.isfinite(energy):             # (a barrier at a gap <= 0: infinite energy, no forces)
+        np.add.at(grad, nodes[idx], e1[:, None] * nvec)
+        np.add.at(pf, plate[idx], e1[:, None] * nvec)
     H = e2[:, None, None] * nvec[:, :, None] * nvec[:, None, :] if hessian else None
     return ContactEval(energy=energy, grad=grad, gap=gap, lam=lam, active=idx, hess=H,
                        hess_nodes=nodes[idx][:, None], plate_force=pf)
