@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from homtex.contact.ccd import plate_step_bound
-from homtex.contact.friction import (friction_coefficients, friction_mollifier, friction_potential,
+from homtex.contact.friction import (_mollifier, friction_coefficients, friction_mollifier, friction_potential,
                                      pair_friction_lag, plate_friction_lag)
-from homtex.contact.potential import Enforcement, pair_stencil, plate_potential
+from homtex.contact.plates import plate_potential
+from homtex.contact.potential import Enforcement, pair_stencil
 from homtex.errors import InputError
 
 ipctk = pytest.importorskip("ipctk")
@@ -32,6 +33,11 @@ def test_mollifier_matches_ipctk():
     a, b = friction_mollifier([eps - 1e-12, eps + 1e-12], eps)
     assert abs(a[0] - a[1]) < 1e-11 and abs(b[0] - b[1]) < 1e-8
     assert f0[0] == pytest.approx(eps / 3) and (f1 <= 1).all()
+    # the kernel's f1/y and (f1' y - f1)/y^3, used by the gradient and the Hessian
+    for v in y[1:]:
+        _, f1y, f2 = _mollifier(v, eps)
+        assert f1y == pytest.approx(ipctk.smooth_friction_f1_over_x(v, eps), rel=1e-13)
+        assert f2 == pytest.approx(ipctk.smooth_friction_f2_x_minus_f1_over_x3(v, eps), rel=1e-13)
 
 
 def crossing(z=0.205):

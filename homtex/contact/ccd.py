@@ -35,7 +35,8 @@ from numba import njit, prange
 
 from ..errors import InputError
 from .distance import _ee_d2
-from .potential import PairStencil, _chunks, _load_stencil, _parallel, _plate_args, _plates, _positions
+from .plates import _plate_args, _plates
+from .potential import PairStencil, _chunks, _load_stencil, _parallel, _positions
 
 log = logging.getLogger(__name__)
 

@@ -36,8 +36,9 @@ from numba import njit, prange
 
 from ..errors import InputError
 from .distance import _d2_at, _ee_classify, _sin2_angle
-from .potential import (Enforcement, PairStencil, _blend, _chunks, _load_stencil, _parallel, _phi,
-                        _plate_args, _plates, _positions, _term_params, _term_weights, pair_gaps)
+from .plates import _plate_args, _plates
+from .potential import (Enforcement, PairStencil, _blend, _chunks, _load_stencil, _parallel, _phi, _positions,
+                        _term_params, _term_weights, pair_gaps)
 
 log = logging.getLogger(__name__)
 
@@ -318,7 +319,7 @@ def pair_friction_lag(x_lag, stencil: PairStencil, enforcement: Enforcement, mu=
 
 def plate_friction_lag(x_lag, nodes, radius, origin, normal, enforcement: Enforcement, plate=0,
                        mu=0.0) -> FrictionLag:
-    """Freeze the node-plate friction contacts at x_lag (arguments as :func:`.plate_potential`)."""
+    """Freeze the node-plate friction contacts at x_lag (arguments as :func:`.plates.plate_potential`)."""
     x = _positions(x_lag)
     o, nr = _plates(origin, normal)
     nodes, radius, plate = _plate_args(x, nodes, radius, plate, len(o))
@@ -369,7 +370,7 @@ def friction_potential(lag: FrictionLag, x, x_start, eps_v: float, plate_motion=
     H = np.zeros((npair, 3 * S, 3 * S)) if hessian else np.zeros((0, 3 * S, 3 * S))
     if npair:
         args = (x, x0, lag.nodes, lag.coef, lag.basis, lag.lam, lag.mu, dref, float(eps_v), hessian, project)
-        if _parallel(npair, "eval"):
+        if _parallel(npair, "friction"):
             _friction_par(*args, _chunks(npair), e, dis, slip, g, H)
         else:
             _friction_ser(*args, e, dis, slip, g, H)

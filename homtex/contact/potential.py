@@ -1,4 +1,4 @@
-"""Smooth contact potentials for large motion: yarn-yarn pairs and yarn-plate nodes.
+"""Smooth contact potentials for large motion: yarn-yarn pairs (plates: :mod:`.plates`).
 
 Enforcement on the gap g (mm) = centre-line distance - (r_a + r_b) (radii as offsets; for a
 plate g = n . (x - p) - r), all zero for g >= ghat and C2 there, kappa in N/mm:
@@ -30,8 +30,9 @@ closest-point case changes).
 
 Gradients are w.r.t. node positions x (n, 3) = reference + translations; the contact force on
 the nodes is -grad. Hessians come per active pair as 12 x 12 blocks over the stencil's four
-nodes (optionally projected to positive semi-definite by clamping eigenvalues), ready to be
-scattered onto the translational DOFs 6 node + 0..2.
+nodes (optionally projected to positive semi-definite by clamping eigenvalues, :mod:`.psd`),
+ready to be scattered onto the translational DOFs 6 node + 0..2 (:func:`assemble_blocks` for
+tests and small problems).
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ from numba import njit, prange
 
 from ..errors import InputError
 from .distance import _d2_at, _ee_classify, _pe_param, _sin2_angle, _stencil_d2
+from .psd import _project_psd, _project_single
 
 log = logging.getLogger(__name__)
 
@@ -183,22 +185,6 @@ def _term_weights(j, w, al, be):
 
 
 @njit(cache=True)
-def _project_psd(H):
-    """Clamp the negative eigenvalues of the symmetric block H (in place)."""
-    lam, V = np.linalg.eigh(H)
-    if lam[0] >= 0.0:
-        return
-    n = H.shape[0]
-    for i in range(n):
-        for j in range(n):
-            acc = 0.0
-            for k in range(n):
-                if lam[k] > 0.0:
-                    acc += V[i, k] * lam[k] * V[j, k]
-            H[i, j] = acc
-
-
-@njit(cache=True)
 def _load_stencil(x, nodes, shift, q, P):
     for k in range(4):
         nd = nodes[q, k]
@@ -208,9 +194,11 @@ def _load_stencil(x, nodes, shift, q, P):
 
 @njit(cache=True)
 def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, tH, gc, Hc, Gp):
-    """Energy, gradient (gout) and Hessian (Hout) of one pair; returns (E, lam, gap_ee).
+    """Energy, gradient (gout) and Hessian (Hout) of one pair.
 
-    lam is the pair's net normal force (N): -sum_j W_j phi'(g_j).
+    Returns (E, lam, gap_ee, nterm, s, t, free_s, free_t): lam the pair's net normal force (N),
+    -sum_j W_j phi'(g_j); nterm the number of terms that contributed (-1 inside the parallel
+    blend) and the case of the last one (for the reduced PSD projection of a single term).
     """
     d2e, es, et, ecase = _ee_classify(P)
     gap_ee = np.sqrt(d2e) - R
@@ -220,9 +208,9 @@ def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, 
             for j in range(12):
                 Hout[i, j] = 0.0
     if gap_ee >= ghat:
-        return 0.0, 0.0, gap_ee
+        return 0.0, 0.0, gap_ee, 0, 0.0, 0.0, False, False
     if kind == 0 and gap_ee <= 0.0:
-        return np.inf, np.inf, gap_ee
+        return np.inf, np.inf, gap_ee, 0, 0.0, 0.0, False, False
     c = _sin2_angle(P, gc, Hc, 0)
     w, w1, w2 = _blend(c, c0, c1)
     blend = w1 != 0.0 or w2 != 0.0
@@ -233,6 +221,9 @@ def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, 
     E = 0.0
     Q = 0.0
     lam = 0.0
+    nterm = 0
+    s1 = t1 = 0.0
+    fs1 = ft1 = False
     for j in range(9):
         W, Wp = _term_weights(j, w, al, be)
         if W == 0.0 and not (blend and Wp != 0.0):
@@ -245,6 +236,8 @@ def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, 
         d2 = _stencil_d2(P, s, t, fs, ft, tg, tH, hess)
         d = max(np.sqrt(d2), 1e-300)
         e, e1, e2 = _phi(d - R, kind, kappa, ghat)
+        nterm += 1
+        s1, t1, fs1, ft1 = s, t, fs, ft
         E += W * e
         lam -= W * e1
         a1 = e1 / (2.0 * d)
@@ -267,7 +260,8 @@ def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, 
                 for m in range(12):
                     Hout[i, m] += (w1 * (gc[i] * Gp[m] + Gp[i] * gc[m]) + w2 * Q * gc[i] * gc[m]
                                    + w1 * Q * Hc[i, m])
-    return E, lam, gap_ee
+        nterm = -1
+    return E, lam, gap_ee, nterm, s1, t1, fs1, ft1
 
 
 @njit(cache=True)
@@ -302,15 +296,20 @@ def _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat,
     Hc = np.empty((12, 12))
     Gp = np.empty(12)
     Hl = np.empty((12, 12))
+    Bm = np.empty((12, 5))
+    M = np.empty((5, 5))
+    V = np.empty((5, 5))
     for r in range(lo, hi):
         q = idx[r]
         _load_stencil(x, nodes, shift, q, P)
-        E, lam, gap = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kappa, ghat, c0, c1, hess,
-                                   g_out[r], Hl, tg, tH, gc, Hc, Gp)
+        E, lam, gap, nterm, s, t, fs, ft = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kappa, ghat, c0,
+                                                        c1, hess, g_out[r], Hl, tg, tH, gc, Hc, Gp)
         e_out[r] = E
         lam_out[r] = lam
         if hess:
-            if project:
+            if project and nterm == 1:
+                _project_single(P, s, t, fs, ft, Hl, Bm, M, V)
+            elif project and nterm != 0:
                 _project_psd(Hl)
             H_out[r] = Hl
 
@@ -429,7 +428,8 @@ class ContactEval:
 
     energy (N mm); grad (n, 3) dE/dx (N; the contact force on the nodes is -grad);
     gap (c,) segment-segment (or node-plate) gap of every candidate (mm); lam (c,) net normal
-    force per candidate (N, >= 0 pushes apart; 0 when inactive); active (na,) indices of the
+    force per candidate (N, > 0 pushes apart; 0 when inactive; a pair's share of the
+    inclusion-exclusion, so sums over pairs are the physical forces); active (na,) indices of the
     candidates with gap < ghat; hess (na, B, B) Hessian blocks of the active ones (B = 12 for
     pairs, 3 for plates) over hess_nodes (na, B/3); plate_force (P, 3) force of the yarns on
     each plate (N; plates only).
@@ -453,9 +453,11 @@ class ContactEval:
         return float(self.gap.min()) if len(self.gap) else np.inf
 
 
-# below this many items a kernel runs serially: a parallel region costs little on an idle machine but
-# waits for every thread, which takes a scheduler slice (~ms) when other work shares the cores
-PARALLEL_MIN = {"gaps": 200000, "ccd": 20000, "eval": 2000}
+# below this many items a kernel runs serially (measured, bench_contact_kernels.py): on an idle
+# machine two threads halve the time, but a parallel region waits for every thread, and on a
+# shared machine whose other core is busy that costs a scheduler tick (4-8 ms) per call, and
+# spinning worker threads slow the serial code around it
+PARALLEL_MIN = {"gaps": 200000, "ccd": 20000, "eval": 5000, "friction": 50000}
 
 
 def _chunks(n):
@@ -518,75 +520,6 @@ def pair_potential(x, stencil: PairStencil, enforcement: Enforcement, hessian: b
     lam[idx] = lam_a
     return ContactEval(energy=energy, grad=grad, gap=gap, lam=lam, active=idx,
                        hess=H if hessian else None, hess_nodes=stencil.nodes[idx])
-
-
-# ----------------------------------------------------------------------------------------
-# plates: rigid planes, node gap g = n . (x - p) - r
-def _plates(origin, normal):
-    o = np.ascontiguousarray(np.asarray(origin, dtype=float).reshape(-1, 3))
-    nr = np.asarray(normal, dtype=float).reshape(-1, 3)
-    if len(o) != len(nr):
-        raise InputError(f"origin and normal need one row per plate, got {len(o)} and {len(nr)}")
-    nn = np.linalg.norm(nr, axis=1)
-    if not (np.isfinite(o).all() and np.isfinite(nr).all() and (nn > 0).all()):
-        raise InputError("plate origin and normal must be finite, normals non-zero")
-    return o, np.ascontiguousarray(nr / nn[:, None])
-
-
-def _plate_args(x, nodes, radius, plate, n_plates):
-    nodes = np.ascontiguousarray(nodes, dtype=np.int64).ravel()
-    p = len(nodes)
-    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), (p,)))
-    plate = np.ascontiguousarray(np.broadcast_to(np.asarray(plate, dtype=np.int64), (p,)))
-    if p and (nodes.min() < 0 or nodes.max() >= len(x)):
-        raise InputError(f"nodes must index x (0..{len(x) - 1})")
-    if not (np.isfinite(radius).all() and (radius >= 0).all()):
-        raise InputError("radius (node contact radius, mm) must be finite and >= 0")
-    if p and (plate.min() < 0 or plate.max() >= n_plates):
-        raise InputError(f"plate must index the {n_plates} plates")
-    return nodes, radius, plate
-
-
-def plate_gaps(x, nodes, radius, origin, normal, plate=0) -> np.ndarray:
-    """(p,) gaps (mm) of nodes against their plates: n . (x - origin) - radius."""
-    x = _positions(x)
-    o, nr = _plates(origin, normal)
-    nodes, radius, plate = _plate_args(x, nodes, radius, plate, len(o))
-    return np.einsum("ij,ij->i", x[nodes] - o[plate], nr[plate]) - radius
-
-
-def plate_potential(x, nodes, radius, origin, normal, enforcement: Enforcement, plate=0,
-                    hessian: bool = True) -> ContactEval:
-    """Node-plate contact potential at node positions x (n, 3).
-
-    Parameters
-    ----------
-    nodes : (p,) candidate nodes; radius : (p,) or scalar node contact radius (mm);
-    origin, normal : (P, 3) a point of each plate and its normal towards the yarns (mm);
-    plate : (p,) or scalar plate of each candidate.
-
-    Returns a :class:`ContactEval` with 3 x 3 blocks (exact and positive semi-definite: the
-    enforcement is convex and the gap linear) and ``plate_force`` (P, 3), the force of the
-    yarns on each plate (N).
-    """
-    x = _positions(x)
-    o, nr = _plates(origin, normal)
-    nodes, radius, plate = _plate_args(x, nodes, radius, plate, len(o))
-    gap = np.einsum("ij,ij->i", x[nodes] - o[plate], nr[plate]) - radius
-    idx = np.flatnonzero(gap < enforcement.ghat)
-    e, e1, e2 = enforcement.energy(gap[idx])
-    nvec = nr[plate[idx]]
-    grad = np.zeros_like(x)
-    energy = float(e.sum())
-    lam = np.zeros(len(nodes))
-    lam[idx] = -e1
-    pf = np.zeros((len(o), 3))
-    if np.isfinite(energy):             # (a barrier at a gap <= 0: infinite energy, no forces)
-        np.add.at(grad, nodes[idx], e1[:, None] * nvec)
-        np.add.at(pf, plate[idx], e1[:, None] * nvec)
-    H = e2[:, None, None] * nvec[:, :, None] * nvec[:, None, :] if hessian else None
-    return ContactEval(energy=energy, grad=grad, gap=gap, lam=lam, active=idx, hess=H,
-                       hess_nodes=nodes[idx][:, None], plate_force=pf)
 
 
 # ----------------------------------------------------------------------------------------

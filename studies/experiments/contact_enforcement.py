@@ -71,8 +71,8 @@ import scipy.sparse.linalg as spla
 
 from homtex.contact.ccd import displacement_cap, pair_step_bound, plate_step_bound
 from homtex.contact.friction import friction_potential, plate_friction_lag
-from homtex.contact.potential import (Enforcement, assemble_blocks, pair_gaps, pair_potential, pair_stencil,
-                                      plate_gaps, plate_potential)
+from homtex.contact.plates import plate_gaps, plate_potential
+from homtex.contact.potential import Enforcement, assemble_blocks, pair_gaps, pair_potential, pair_stencil
 
 R = 0.1                    # yarn radius, mm
 F = 1.0                    # load per node, N
