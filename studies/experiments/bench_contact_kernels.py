@@ -7,6 +7,17 @@ and parallel (numba threads): the gaps of all candidates, the barrier potential 
 PSD-projected Hessian blocks, the friction lag and potential, and the additive CCD bound for a
 random step of 0.02 mm.
 
+Measured here (2 cores shared with other work, 2026-11-24; ms per call, serial / 2 threads):
+
+    pairs (all active)   gaps         potential+PSD Hessian   friction lag   friction     CCD
+    968                  0.05 / 0.04  9.5 / 5.0               0.37           0.42 / 0.35  0.61 / 0.34
+    93537                4.3 / 2.5    904 / 465               41             56 / 31      61 / 31
+
+i.e. ~10 us per active pair for energy, gradient and projected Hessian (1.2 us without the
+projection, 0.5 us without the Hessian), ~0.6 us per pair for friction and the CCD. When the
+other core is busy a parallel call can cost a scheduler tick (4-8 ms) more than the serial one,
+hence the size thresholds of ``homtex.contact.potential.PARALLEL_MIN``.
+
 Usage::
 
     python studies/experiments/bench_contact_kernels.py [OUT] [--quick]
