@@ -116,7 +116,7 @@ def _check_eta(eta):
 
 
 def pair_step_bound(x, dx, stencil: PairStencil, eta: float = 0.1, rtol: float = 0.05,
-                    max_iter: int = 10_000, use_radii: bool = True, return_pairs: bool = False):
+                    max_iter: int = 10_000, use_radii: bool = True, return_pairs: bool = False) -> float | tuple:
     """Largest safe step alpha in [0, 1] for the yarn-yarn pairs of ``stencil``.
 
     Parameters
@@ -155,7 +155,7 @@ def pair_step_bound(x, dx, stencil: PairStencil, eta: float = 0.1, rtol: float =
 
 
 def plate_step_bound(x, dx, nodes, radius, origin, normal, plate=0, plate_motion=None, eta: float = 0.1,
-                     use_radii: bool = True, return_nodes: bool = False):
+                     use_radii: bool = True, return_nodes: bool = False) -> float | tuple:
     """Largest step alpha in [0, 1] keeping every node's plate gap >= eta x its starting value.
 
     ``plate_motion`` (P, 3): the plates' motion along the same step (mm). Gaps are linear in
@@ -190,7 +190,7 @@ def displacement_cap(dx, r_min: float) -> float:
     return 1.0 if m <= r_min else r_min / m
 
 
-def step_candidates(broad, x, dx, ghat: float = 0.0):
+def step_candidates(broad, x, dx, ghat: float = 0.0) -> dict:
     """Broad-phase pairs that can come within ghat of contact along x + alpha dx, alpha in [0, 1].
 
     ``broad`` is a :class:`homtex.contact.broad.BroadPhase`: its search margin is widened by

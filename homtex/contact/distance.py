@@ -307,7 +307,7 @@ def _segment(p0, p1, name):
     return a, b
 
 
-def segment_distance(a0, a1, b0, b1, hessian: bool = True):
+def segment_distance(a0, a1, b0, b1, hessian: bool = True) -> tuple:
     """Squared distance between segments (a0, a1) and (b0, b1), with exact derivatives.
 
     Parameters
@@ -330,7 +330,7 @@ def segment_distance(a0, a1, b0, b1, hessian: bool = True):
     return float(d2), g, (H if hessian else None), int(case)
 
 
-def point_segment_distance(p, e0, e1, hessian: bool = True):
+def point_segment_distance(p, e0, e1, hessian: bool = True) -> tuple:
     """Squared distance between point p and segment (e0, e1), with exact derivatives.
 
     Returns (d2, grad (9,) w.r.t. (p, e0, e1), hess (9, 9) or None, case) with the case
@@ -348,7 +348,7 @@ def point_segment_distance(p, e0, e1, hessian: bool = True):
     return float(d2), g[keep], (H[np.ix_(keep, keep)] if hessian else None), int(st)
 
 
-def point_point_distance(p, q):
+def point_point_distance(p, q) -> tuple:
     """Squared distance |p - q|^2 (mm^2), its gradient (6,) and Hessian (6, 6)."""
     p = _point(p, "p")
     q = _point(q, "q")
@@ -357,7 +357,7 @@ def point_point_distance(p, q):
     return float(d @ d), np.concatenate([2 * d, -2 * d]), 2.0 * np.block([[I3, -I3], [-I3, I3]])
 
 
-def point_plane_gap(p, origin, normal, radius: float = 0.0):
+def point_plane_gap(p, origin, normal, radius: float = 0.0) -> tuple:
     """Gap between a sphere of ``radius`` at p and the plane through ``origin`` with ``normal``.
 
     g = n . (p - origin) - radius (mm), n = normal / |normal| pointing to the side where the
@@ -377,7 +377,7 @@ def point_plane_gap(p, origin, normal, radius: float = 0.0):
     return float(n @ (p - o) - r), n
 
 
-def sin2_angle(a0, a1, b0, b1, hessian: bool = True):
+def sin2_angle(a0, a1, b0, b1, hessian: bool = True) -> tuple:
     """c = sin^2 of the angle between segments a and b (|ea x eb|^2 / (|ea|^2 |eb|^2)).
 
     Returns (c, grad (12,), hess (12, 12) or None); the measure of parallelism used by the

@@ -101,7 +101,7 @@ def _arc_kernel(elements, images, yarn, length, radius, node_ptr, inc, margin, k
     return ptr, out_e, out_i, overflow
 
 
-def arc_exclusions(frame, margin: float | None = None):
+def arc_exclusions(frame, margin: float | None = None) -> tuple:
     """Element pairs never treated as contacts: same yarn and closer than 2 r + margin along it.
 
     Parameters

@@ -56,7 +56,7 @@ def _mollifier(y, eps):
     return f0, f1y, 0.0
 
 
-def friction_mollifier(y, eps: float):
+def friction_mollifier(y, eps: float) -> tuple:
     """IPC's mollifier f0 and f1 = f0' at slips y >= 0 (mm); eps > 0 (mm). Returns (f0, f1)."""
     y = np.abs(np.asarray(y, dtype=float))
     f0 = np.where(y < eps, -y ** 3 / (3 * eps ** 2) + y ** 2 / eps + eps / 3, y)

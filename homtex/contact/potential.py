@@ -523,7 +523,7 @@ def pair_potential(x, stencil: PairStencil, enforcement: Enforcement, hessian: b
 
 
 # ----------------------------------------------------------------------------------------
-def assemble_blocks(blocks, block_nodes, n_nodes: int, dof_per_node: int = 3):
+def assemble_blocks(blocks, block_nodes, n_nodes: int, dof_per_node: int = 3) -> sp.csr_matrix:
     """Scatter (na, 3s, 3s) blocks over (na, s) nodes into a sparse (N, N) CSR matrix.
 
     ``dof_per_node`` 3 (translations only) or 6 (the frame's DOFs: translations 6 i + 0..2).
