@@ -1,0 +1,384 @@
+"""Lagged, smoothed Coulomb friction for yarn-yarn pairs and yarn-plate nodes (IPC style).
+
+At the lag state x_lag (the start of the step, or of a lag iteration) every active contact
+term j freezes its normal force lambda_j (N), its closest-point weights c_j (the barycentric
+coefficients of its stencil nodes) and a tangent basis T_j (3 x 2, orthonormal, orthogonal to
+its normal). Over the step from x_start to x its tangential slip is
+
+    u_j = T_j^T (sum_k c_jk (x_k - x_start_k) - d_j)      (mm, 2-vector)
+
+(d_j: the motion of a rigid plate at the contact over the step; 0 for pairs) and the friction
+potential is D = sum_j mu_j lambda_j f0(|u_j|), with IPC's C1 mollifier
+
+    f0(y) = -y^3 / (3 eps^2) + y^2 / eps + eps / 3   (y < eps),   f0(y) = y   (y >= eps).
+
+eps (mm) is the slip at which friction saturates: for |u| >= eps the force on the contact is
+mu lambda against the slip (sliding), below it a stiff elastic stick of at most mu lambda.
+The force is -grad D; the Hessian of one contact, mu lambda c c^T (x) T M T^T with
+M = f1(y)/y I + (f1'(y) y - f1(y))/y^3 u u^T, is positive semi-definite (f0(|u|) is convex
+and the slip linear in x). Pair terms carry the signed weights of the contact potential's
+inclusion-exclusion (:mod:`.potential`): a negative term cancels a positive one of a neighbouring
+pair at the same point, so ``project=True`` leaves the negative terms out of the Hessian (a PSD
+block, stiffer than the exact one by at most the cancelled terms; the gradient stays exact).
+
+The energy friction dissipates over a step is the work of its forces along the straight path
+from x_start to x: sum_j mu_j lambda_j (f0(|u_j|) - eps / 3), i.e. mu lambda (s - eps/3) for a
+slip s >= eps.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from ..errors import InputError
+from .distance import _d2_at, _ee_classify, _sin2_angle
+from .plates import _plate_args, _plates
+from .potential import (Enforcement, PairStencil, _blend, _chunks, _load_stencil, _parallel, _phi, _positions,
+                        _term_params, _term_weights, pair_gaps)
+
+log = logging.getLogger(__name__)
+
+
+# ----------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _mollifier(y, eps):
+    """(f0, f1/y, (f1' y - f1)/y^3) of IPC's friction mollifier at y >= 0."""
+    if y >= eps:
+        return y, 1.0 / y, -1.0 / (y * y * y)
+    f0 = -y * y * y / (3.0 * eps * eps) + y * y / eps + eps / 3.0
+    f1y = -y / (eps * eps) + 2.0 / eps
+    if y > 0.0:
+        return f0, f1y, -1.0 / (y * eps * eps)
+    return f0, f1y, 0.0
+
+
+def friction_mollifier(y, eps: float) -> tuple:
+    """IPC's mollifier f0 and f1 = f0' at slips y >= 0 (mm); eps > 0 (mm). Returns (f0, f1)."""
+    y = np.abs(np.asarray(y, dtype=float))
+    f0 = np.where(y < eps, -y ** 3 / (3 * eps ** 2) + y ** 2 / eps + eps / 3, y)
+    f1 = np.where(y < eps, -y ** 2 / eps ** 2 + 2 * y / eps, 1.0)
+    return f0, f1
+
+
+@njit(cache=True, inline="always")
+def _basis(nx, ny, nz, T, j):
+    """Orthonormal tangents of unit normal n into T[j] (3, 2)."""
+    ax = abs(nx)
+    ay = abs(ny)
+    az = abs(nz)
+    # cross n with the coordinate axis least aligned with it
+    if ax <= ay and ax <= az:
+        t1x, t1y, t1z = 0.0, -nz, ny
+    elif ay <= az:
+        t1x, t1y, t1z = nz, 0.0, -nx
+    else:
+        t1x, t1y, t1z = -ny, nx, 0.0
+    nn = np.sqrt(t1x * t1x + t1y * t1y + t1z * t1z)
+    t1x /= nn
+    t1y /= nn
+    t1z /= nn
+    T[j, 0, 0] = t1x
+    T[j, 1, 0] = t1y
+    T[j, 2, 0] = t1z
+    T[j, 0, 1] = ny * t1z - nz * t1y
+    T[j, 1, 1] = nz * t1x - nx * t1z
+    T[j, 2, 1] = nx * t1y - ny * t1x
+
+
+@njit(cache=True)
+def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, lo, hi, lam, coef, T):
+    """Lagged terms of active pairs idx[lo:hi]: lam (na, 9), coef (na, 9, 4), T (na, 9, 3, 2)."""
+    P = np.empty((4, 3))
+    gc = np.empty(12)
+    Hc = np.empty((1, 1))
+    for r in range(lo, hi):
+        q = idx[r]
+        _load_stencil(x, nodes, shift, q, P)
+        d2e, es, et, ecase = _ee_classify(P)
+        w, w1, w2 = _blend(_sin2_angle(P, gc, Hc, 0), c0, c1)
+        for j in range(9):
+            lam[r, j] = 0.0
+            W, Wp = _term_weights(j, w, alpha[q], beta[q])
+            if W == 0.0:
+                continue
+            s, t, fs, ft = _term_params(P, j, es, et, ecase)
+            d = np.sqrt(_d2_at(P, s, t))
+            if d - rsum[q] >= ghat or d <= 0.0:
+                continue
+            e, e1, e2 = _phi(d - rsum[q], kind, kappa, ghat)
+            lam[r, j] = -W * e1
+            coef[r, j, 0] = 1.0 - s
+            coef[r, j, 1] = s
+            coef[r, j, 2] = -(1.0 - t)
+            coef[r, j, 3] = -t
+            nx = ny = nz = 0.0
+            for k in range(4):
+                nx += coef[r, j, k] * P[k, 0]
+                ny += coef[r, j, k] * P[k, 1]
+                nz += coef[r, j, k] * P[k, 2]
+            _basis(nx / d, ny / d, nz / d, T[r], j)
+
+
+@njit(cache=True)
+def _pair_lag(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, lam, coef, T):
+    _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, 0, idx.size, lam, coef, T)
+
+
+@njit(cache=True)
+def _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, lo, hi,
+                    e_out, dis_out, slip_out, g_out, H_out):
+    """Friction energy, dissipation, slips, gradient (np, 3S) and Hessian (np, 3S, 3S)."""
+    S = nodes.shape[1]
+    J = lam.shape[1]
+    B = 3 * S
+    d = np.empty(3)
+    Hl = np.empty((B, B))
+    for r in range(lo, hi):
+        E = 0.0
+        dis = 0.0
+        for i in range(B):
+            g_out[r, i] = 0.0
+            if hess:
+                for m in range(B):
+                    Hl[i, m] = 0.0
+        for j in range(J):
+            lj = lam[r, j]
+            slip_out[r, j] = 0.0
+            if lj == 0.0:
+                continue
+            # a negative (inclusion-exclusion) term cancels a positive one of a neighbouring pair
+            # at the same point; projecting, its Hessian is left out (each kept one is PSD)
+            skip_h = project and lj < 0.0
+            for i in range(3):
+                d[i] = -dref[r, i]
+            for k in range(S):
+                ck = coef[r, j, k]
+                nd = nodes[r, k]
+                for i in range(3):
+                    d[i] += ck * (x[nd, i] - x0[nd, i])
+            u0 = T[r, j, 0, 0] * d[0] + T[r, j, 1, 0] * d[1] + T[r, j, 2, 0] * d[2]
+            u1 = T[r, j, 0, 1] * d[0] + T[r, j, 1, 1] * d[1] + T[r, j, 2, 1] * d[2]
+            y = np.sqrt(u0 * u0 + u1 * u1)
+            f0, f1y, f2 = _mollifier(y, eps)
+            ml = mu[r] * lj
+            E += ml * f0
+            dis += ml * (f0 - eps / 3.0)
+            slip_out[r, j] = y
+            # tangential force direction in 3D: T u
+            v0 = T[r, j, 0, 0] * u0 + T[r, j, 0, 1] * u1
+            v1 = T[r, j, 1, 0] * u0 + T[r, j, 1, 1] * u1
+            v2 = T[r, j, 2, 0] * u0 + T[r, j, 2, 1] * u1
+            for k in range(S):
+                a = ml * f1y * coef[r, j, k]
+                g_out[r, 3 * k] += a * v0
+                g_out[r, 3 * k + 1] += a * v1
+                g_out[r, 3 * k + 2] += a * v2
+            if hess and not skip_h:
+                # 3 x 3 core: f1/y T T^T + f2 (T u)(T u)^T
+                for i in range(3):
+                    vi = v0 if i == 0 else (v1 if i == 1 else v2)
+                    for m in range(3):
+                        vm = v0 if m == 0 else (v1 if m == 1 else v2)
+                        core = ml * (f1y * (T[r, j, i, 0] * T[r, j, m, 0] + T[r, j, i, 1] * T[r, j, m, 1])
+                                     + f2 * vi * vm)
+                        for k in range(S):
+                            for l in range(S):
+                                Hl[3 * k + i, 3 * l + m] += coef[r, j, k] * coef[r, j, l] * core
+        e_out[r] = E
+        dis_out[r] = dis
+        if hess:
+            H_out[r] = Hl
+
+
+@njit(cache=True)
+def _friction_ser(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, e_out, dis_out, slip_out, g_out, H_out):
+    _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, 0, nodes.shape[0],
+                    e_out, dis_out, slip_out, g_out, H_out)
+
+
+@njit(cache=True, parallel=True)
+def _friction_par(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, nch,
+                  e_out, dis_out, slip_out, g_out, H_out):
+    npair = nodes.shape[0]
+    for ch in prange(nch):
+        _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, ch * npair // nch,
+                        (ch + 1) * npair // nch, e_out, dis_out, slip_out, g_out, H_out)
+
+
+@njit(cache=True)
+def _scatter_rows(nodes, g, out):
+    for r in range(nodes.shape[0]):
+        for k in range(nodes.shape[1]):
+            nd = nodes[r, k]
+            for i in range(3):
+                out[nd, i] += g[r, 3 * k + i]
+
+
+# ----------------------------------------------------------------------------------------
+@dataclass
+class FrictionLag:
+    """Lagged friction contacts (frozen at x_lag).
+
+    nodes (np, S) stencil nodes (S = 4 for pairs, 1 for plates); coef (np, J, S) closest-point
+    weights of each term; basis (np, J, 3, 2) tangents; lam (np, J) normal forces (N, signed:
+    pair terms carry the inclusion-exclusion weights); mu (np,) friction coefficients;
+    index (np,) the candidate each row comes from; plate (np,) plate of each row (-1 for pairs).
+    """
+
+    nodes: np.ndarray
+    coef: np.ndarray
+    basis: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    index: np.ndarray
+    plate: np.ndarray
+
+    def __len__(self):
+        return len(self.nodes)
+
+    @property
+    def normal_force(self) -> np.ndarray:
+        """(np,) net lagged normal force of each row (N)."""
+        return self.lam.sum(axis=1)
+
+
+@dataclass
+class FrictionEval:
+    """Friction potential over a step.
+
+    energy (N mm, including the constant mu lambda eps/3 per contact); dissipation (N mm: work of
+    the friction forces from x_start to x); grad (n, 3) (N; force = -grad); hess (np, B, B)
+    blocks over hess_nodes (np, S); slip (np, J) tangential slips (mm); plate_force (P, 3) force
+    of friction on each plate (N; plate rows only, else zeros).
+    """
+
+    energy: float
+    dissipation: float
+    grad: np.ndarray
+    hess: np.ndarray | None
+    hess_nodes: np.ndarray
+    slip: np.ndarray
+    plate_force: np.ndarray
+
+
+def friction_coefficients(mu, type_a=None, type_b=None, n: int | None = None) -> np.ndarray:
+    """Per-contact friction coefficients from a scalar or an (ntypes, ntypes) table.
+
+    ``mu`` scalar: every contact; a symmetric table: mu[type_a, type_b] (yarn types of the two
+    elements); an (n,) array: one value per contact. Values must be finite and >= 0.
+    """
+    m = np.asarray(mu, dtype=float)
+    if not (np.isfinite(m).all() and (m >= 0).all()):
+        raise InputError(f"mu (friction coefficient) must be finite and >= 0, got {mu!r}")
+    if m.ndim == 0:
+        if n is None:
+            n = 0 if type_a is None else len(type_a)
+        return np.full(n, float(m))
+    if m.ndim == 2:
+        if m.shape[0] != m.shape[1] or not np.allclose(m, m.T):
+            raise InputError(f"mu table must be square and symmetric (ntypes, ntypes), got shape {m.shape}")
+        if type_a is None or type_b is None:
+            raise InputError("a mu table needs type_a and type_b (the yarn types of each contact)")
+        ta = np.asarray(type_a, dtype=np.int64)
+        tb = np.asarray(type_b, dtype=np.int64)
+        if len(ta) and (min(ta.min(), tb.min()) < 0 or max(ta.max(), tb.max()) >= len(m)):
+            raise InputError(f"type_a/type_b must index the {len(m)} x {len(m)} mu table")
+        return np.ascontiguousarray(m[ta, tb])
+    if n is not None and m.shape != (n,):
+        raise InputError(f"mu must be a scalar, a table or have shape ({n},), got {m.shape}")
+    return np.ascontiguousarray(m.ravel())
+
+
+def pair_friction_lag(x_lag, stencil: PairStencil, enforcement: Enforcement, mu=0.0) -> FrictionLag:
+    """Freeze the yarn-yarn friction contacts at positions x_lag (n, 3).
+
+    ``mu``: scalar or (c,) per candidate (see :func:`friction_coefficients`). Rows: the pairs
+    active at x_lag with mu > 0.
+    """
+    x = _positions(x_lag, int(stencil.nodes.max()) + 1 if len(stencil) else None)
+    mu_c = friction_coefficients(mu, n=len(stencil))
+    from_gap = pair_gaps(x, stencil)
+    idx = np.flatnonzero((from_gap < enforcement.ghat) & (mu_c > 0)).astype(np.int64)
+    na = len(idx)
+    lam = np.zeros((na, 9))
+    coef = np.zeros((na, 9, 4))
+    T = np.zeros((na, 9, 3, 2))
+    if na:
+        if enforcement.kind == "barrier" and from_gap[idx].min() <= 0:
+            raise InputError("x_lag: a pair's gap is <= 0, where the barrier is infinite")
+        c0, c1 = enforcement.c_range
+        _pair_lag(x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
+                  enforcement.code, float(enforcement.kappa), float(enforcement.ghat), c0, c1, lam, coef, T)
+    return FrictionLag(nodes=stencil.nodes[idx], coef=coef, basis=T, lam=lam, mu=mu_c[idx], index=idx,
+                       plate=np.full(na, -1, dtype=np.int64))
+
+
+def plate_friction_lag(x_lag, nodes, radius, origin, normal, enforcement: Enforcement, plate=0,
+                       mu=0.0) -> FrictionLag:
+    """Freeze the node-plate friction contacts at x_lag (arguments as :func:`.plates.plate_potential`)."""
+    x = _positions(x_lag)
+    o, nr = _plates(origin, normal)
+    nodes, radius, plate = _plate_args(x, nodes, radius, plate, len(o))
+    mu_c = friction_coefficients(mu, n=len(nodes))
+    gap = np.einsum("ij,ij->i", x[nodes] - o[plate], nr[plate]) - radius
+    idx = np.flatnonzero((gap < enforcement.ghat) & (mu_c > 0))
+    e, e1, e2 = enforcement.energy(gap[idx])
+    if not np.isfinite(e1).all():
+        raise InputError("x_lag: a node's plate gap is <= 0, where the barrier is infinite")
+    na = len(idx)
+    T = np.zeros((na, 1, 3, 2))
+    for r in range(na):
+        n = nr[plate[idx[r]]]
+        _basis(n[0], n[1], n[2], T[r], 0)
+    return FrictionLag(nodes=nodes[idx][:, None], coef=np.ones((na, 1, 1)), basis=T, lam=-e1[:, None],
+                       mu=mu_c[idx], index=idx, plate=plate[idx])
+
+
+def friction_potential(lag: FrictionLag, x, x_start, eps_v: float, plate_motion=None, hessian: bool = True,
+                       project: bool = True) -> FrictionEval:
+    """Lagged friction potential at x (n, 3) for the step from x_start (n, 3).
+
+    eps_v : slip (mm, > 0) at which friction saturates. plate_motion : (P, 3) displacement of
+    each plate over the step (mm; plate rows). project : PSD-project pair blocks whose terms
+    include negative weights.
+    """
+    x = _positions(x)
+    x0 = _positions(x_start)
+    if x0.shape != x.shape:
+        raise InputError(f"x_start must have the shape of x {x.shape}, got {x0.shape}")
+    if not (np.isfinite(eps_v) and eps_v > 0):
+        raise InputError(f"eps_v (slip at which friction saturates, mm) must be positive, got {eps_v!r}")
+    npair, S = lag.nodes.shape if len(lag) else (0, lag.nodes.shape[1] if lag.nodes.ndim == 2 else 1)
+    J = lag.lam.shape[1] if lag.lam.ndim == 2 else 1
+    dref = np.zeros((npair, 3))
+    nplates = 0
+    if (lag.plate >= 0).any():
+        if plate_motion is None:
+            plate_motion = np.zeros((int(lag.plate.max()) + 1, 3))
+        pm = np.asarray(plate_motion, dtype=float).reshape(-1, 3)
+        nplates = len(pm)
+        sel = lag.plate >= 0
+        dref[sel] = pm[lag.plate[sel]]
+    e = np.zeros(npair)
+    dis = np.zeros(npair)
+    slip = np.zeros((npair, J))
+    g = np.zeros((npair, 3 * S))
+    H = np.zeros((npair, 3 * S, 3 * S)) if hessian else np.zeros((0, 3 * S, 3 * S))
+    if npair:
+        args = (x, x0, lag.nodes, lag.coef, lag.basis, lag.lam, lag.mu, dref, float(eps_v), hessian, project)
+        if _parallel(npair, "friction"):
+            _friction_par(*args, _chunks(npair), e, dis, slip, g, H)
+        else:
+            _friction_ser(*args, e, dis, slip, g, H)
+    grad = np.zeros_like(x)
+    _scatter_rows(lag.nodes, g, grad)
+    pf = np.zeros((nplates, 3))
+    if nplates:
+        sel = np.flatnonzero(lag.plate >= 0)
+        np.add.at(pf, lag.plate[sel], g[sel, :3])
+    return FrictionEval(energy=float(e.sum()), dissipation=float(dis.sum()), grad=grad,
+                        hess=H if hessian else None, hess_nodes=lag.nodes, slip=slip, plate_force=pf)

@@ -1,0 +1,34 @@
+"""Smoke tests of the contact studies' quick modes (they write what they say)."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+STUDIES = Path(__file__).resolve().parents[1] / "studies" / "experiments"
+
+
+def load(name):
+    spec = importlib.util.spec_from_file_location(name, STUDIES / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.slow
+def test_contact_enforcement_quick(tmp_path):
+    mod = load("contact_enforcement")
+    ds = mod.run(tmp_path, quick=True, docs=False)
+    assert (tmp_path / "contact_enforcement.nc").exists() and (tmp_path / "contact_enforcement.png").exists()
+    # the barrier with the CCD converges on every quick run and never penetrates
+    b = ds.sel(enforcement="barrier", step="ccd")
+    assert bool(b.converged.all())
+    assert "units" in ds.gap_error.attrs and "problem" in ds.dims
+    assert "converged" in mod.summary(ds)
+
+
+@pytest.mark.slow
+def test_bench_contact_kernels_quick(tmp_path):
+    ds = load("bench_contact_kernels").run(tmp_path, (12,), repeat=1)
+    assert (tmp_path / "bench_contact_kernels.nc").exists()
+    assert int(ds.pairs[0]) > 0 and bool((ds.seconds > 0).all())
