@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from homtex.contact.ccd import plate_step_bound
-from homtex.contact.friction import (_mollifier, friction_coefficients, friction_mollifier, friction_potential,
-                                     pair_friction_lag, plate_friction_lag)
+from homtex.contact.friction import (
+    _mollifier,
+    friction_coefficients,
+    friction_mollifier,
+    friction_potential,
+    pair_friction_lag,
+    plate_friction_lag,
+)
 from homtex.contact.plates import plate_potential
 from homtex.contact.potential import Enforcement, pair_stencil
 from homtex.errors import InputError

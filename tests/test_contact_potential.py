@@ -7,8 +7,13 @@ import pytest
 
 import homtex
 from homtex.contact.broad import BroadPhase, exclusion_lists
-from homtex.contact.distance import (point_plane_gap, point_point_distance, point_segment_distance,
-                                     segment_distance, sin2_angle)
+from homtex.contact.distance import (
+    point_plane_gap,
+    point_point_distance,
+    point_segment_distance,
+    segment_distance,
+    sin2_angle,
+)
 from homtex.contact.exclusions import arc_exclusions
 from homtex.contact.plates import plate_potential
 from homtex.contact.potential import Enforcement, assemble_blocks, frame_stencil, pair_potential, pair_stencil

@@ -37,8 +37,19 @@ from numba import njit, prange
 from ..errors import InputError
 from .distance import _d2_at, _ee_classify, _sin2_angle
 from .plates import _plate_args, _plates
-from .potential import (Enforcement, PairStencil, _blend, _chunks, _load_stencil, _parallel, _phi, _positions,
-                        _term_params, _term_weights, pair_gaps)
+from .potential import (
+    Enforcement,
+    PairStencil,
+    _blend,
+    _chunks,
+    _load_stencil,
+    _parallel,
+    _phi,
+    _positions,
+    _term_params,
+    _term_weights,
+    pair_gaps,
+)
 
 log = logging.getLogger(__name__)
 
