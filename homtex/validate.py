@@ -11,9 +11,10 @@ import math
 
 import numpy as np
 
-from .errors import CellError
+from .errors import CellError, InputError
 
-__all__ = ["check_keys", "get_int", "get_list", "get_number", "get_str", "get_table", "type_name"]
+__all__ = ["check_choice", "check_int", "check_keys", "check_number", "check_seed", "check_tol", "get_int", "get_list",
+           "get_number", "get_str", "get_table", "type_name"]
 
 
 def is_number(v) -> bool:
@@ -134,3 +135,53 @@ def get_table(d, key, table, required=True) -> dict:
         name = f"{table}.{key}" if table else key
         raise CellError(f"must be a table, got {type_name(v)} {v!r}", table=name)
     return v
+
+
+# ------------------------------------------------------------------ arguments of the public API
+def _fail(name: str, want: str, value) -> InputError:
+    return InputError(f"{name} must be {want}, got {value!r}")
+
+
+def check_number(value, name: str, *, gt=None, ge=None, lt=None, le=None, finite: bool = True) -> float:
+    """A real number (not a boolean, not complex, finite unless ``finite=False``) within the
+    bounds, as float; else InputError naming ``name`` and the allowed range."""
+    bounds = [f"> {gt:g}" if gt is not None else "", f">= {ge:g}" if ge is not None else "",
+              f"< {lt:g}" if lt is not None else "", f"<= {le:g}" if le is not None else ""]
+    want = "a finite number" + "".join(f" {b}" for b in bounds if b).replace("  ", " ")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise _fail(name, want, value)
+    v = float(value)
+    if math.isnan(v) or (finite and not math.isfinite(v)):
+        raise _fail(name, want, value)
+    if (gt is not None and not v > gt) or (ge is not None and not v >= ge) or \
+            (lt is not None and not v < lt) or (le is not None and not v <= le):
+        raise _fail(name, want, value)
+    return v
+
+
+def check_int(value, name: str, *, ge=None, le=None) -> int:
+    """An integer (Python or numpy, not a boolean, not a float) within the bounds; else InputError."""
+    want = "an integer" + (f" >= {ge}" if ge is not None else "") + (f" <= {le}" if le is not None else "")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise _fail(name, want, value)
+    v = int(value)
+    if (ge is not None and v < ge) or (le is not None and v > le):
+        raise _fail(name, want, value)
+    return v
+
+
+def check_choice(value, name: str, choices) -> str:
+    """One of ``choices``; else InputError listing them."""
+    if not isinstance(value, str) or value not in choices:
+        raise InputError(f"{name} must be one of {tuple(choices)}, got {value!r}")
+    return value
+
+
+def check_tol(value, name: str = "tol") -> float:
+    """A relative tolerance: a finite number in (0, 1)."""
+    return check_number(value, name, gt=0.0, lt=1.0)
+
+
+def check_seed(value, name: str = "seed"):
+    """None or a non-negative integer (a random seed)."""
+    return None if value is None else check_int(value, name, ge=0)

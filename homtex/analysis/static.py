@@ -16,7 +16,7 @@ from ..model.frame import Frame
 from ..model.results import ENERGY_KEYS, StaticResult
 from ..model.scene import Scene
 
-__all__ = ["element_state", "prestrain_load", "solve_linear"]
+__all__ = ["check_finite", "element_state", "prestrain_load", "solve_linear"]
 
 
 def element_state(frame: Frame, u: np.ndarray, jump=None, prestrain=None) -> tuple[np.ndarray, np.ndarray]:
@@ -55,6 +55,17 @@ def prestrain_load(frame: Frame, EA=None, prestrain=None) -> np.ndarray:
     return f.ravel()
 
 
+def check_finite(**arrays) -> None:
+    """SolverError naming the first result array with a non-finite value (an answer beyond
+    double precision: loads or pre-strains far outside any physical range)."""
+    for name, a in arrays.items():
+        with np.errstate(over="ignore", invalid="ignore"):
+            ok = np.all(np.isfinite(a))
+        if not ok:
+            raise SolverError(f"the {name} of the solution overflow double precision (non-finite values): "
+                              "loads, prescribed motions or pre-strains far outside a physical range")
+
+
 def solve_linear(frame: Frame, fixed=None, loads=None, *, solver: str | None = None, tol: float | None = None,
                  maxiter: int | None = None, assembler: Assembler | None = None) -> StaticResult:
     """Solve K u = f for a frame with supports and loads (no contact; see ``homtex.solve_static``).
@@ -83,5 +94,6 @@ def solve_linear(frame: Frame, fixed=None, loads=None, *, solver: str | None = N
     u = x.reshape(n, 6)
     forces, energy = element_state(frame, u)
     reactions = np.where(mask, K @ x - f, 0.0).reshape(n, 6)
+    check_finite(u=u, forces=forces, energy=energy, reactions=reactions)
     return StaticResult(frame=frame, u=u, report=rep, forces=forces,
                         energy=dict(zip(ENERGY_KEYS, energy.T.copy())), reactions=reactions)

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from ..analysis.static import element_state, prestrain_load
+from ..analysis.static import check_finite, element_state, prestrain_load
 from ..config import option
 from ..errors import InputError, SolverError
 from ..fem.assembly import Assembler
@@ -361,6 +361,7 @@ class ContactSolver(ActiveSets, LinearSystems):
         fc = rows.C.T @ lam
         Kx = self.K_ext @ x
         reactions = np.where(self.mask, Kx - self.f - fc, 0.0)[:6 * n].reshape(n, 6)
+        check_finite(u=ufr, forces=forces, energy=energy, reactions=reactions, contact_forces=lam)
         st = {k2: self.stats[k2] - stats0[k2] for k2 in self.stats if k2 != "forward_error"}
         st["forward_error"] = self.stats["forward_error"]
         extra = {
