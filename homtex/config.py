@@ -141,5 +141,12 @@ def get_options() -> dict[str, Any]:
 
 
 def option(name: str, value=None):
-    """``value`` if it is given (not None), else the current option ``name``."""
-    return OPTIONS[name] if value is None else value
+    """``value`` if it is given (not None), checked like the option ``name`` (InputError naming the
+    argument: ``solver`` for the ``*_solver`` options), else the current option ``name``."""
+    if value is None:
+        return OPTIONS[name]
+    ok, what = _VALIDATORS[name]
+    if not ok(value):
+        arg = "solver" if name.endswith("_solver") else name
+        raise InputError(f"{arg} must be {what}, got {value!r}")
+    return value

@@ -64,7 +64,7 @@ def test_index_out_of_range(el, culprit):
     ("E", -5.0, "E of element 0"),
     ("nu", [0.3, 0.3, 0.5], "nu of element 2"),
     ("nu", -1.0, "nu of element 0"),
-    ("semi_axes", [[0.1, 0.1], [0.1, -0.1], [0.2, 0.1]], "radius of element 1"),
+    ("semi_axes", [[0.1, 0.1], [0.1, -0.1], [0.2, 0.1]], r"semi-axis b \(semi_axes\[:, 1\]\) of element 1"),
 ])
 def test_bad_section_or_material(name, value, culprit):
     kw = {name: value}

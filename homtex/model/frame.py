@@ -12,6 +12,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import InputError
+from .arrays import MAX_COORD, as_index, as_real, per_element, to_array
 from .sections import section_properties
 
 #: per-element constructor arguments of a Frame, in the order :meth:`Frame.element_fields` returns them
@@ -19,18 +20,10 @@ ELEMENT_FIELDS = ("semi_axes", "E", "nu", "yarn", "ref", "contact_radius", "pres
                   "torsion_factor")
 #: defaults of the fields that have one (used when frames are joined, :func:`stack_fields`)
 FIELD_DEFAULTS = {"prestrain": 0.0, "bending_factor": 1.0, "torsion_factor": 1.0}
-
-
-def _per_element(value, m, name, dtype=float):
-    """Broadcast a scalar or (m,) array to a contiguous (m,) array, naming ``name`` on failure."""
-    if value is None:
-        raise InputError(f"parameter '{name}' is required")
-    arr = np.asarray(value, dtype=dtype)
-    if arr.ndim == 0:
-        return np.full(m, arr, dtype=dtype)
-    if arr.shape != (m,):
-        raise InputError(f"parameter '{name}' must be a scalar or have shape ({m},) (one per element), got {arr.shape}")
-    return np.ascontiguousarray(arr)
+#: largest Young's modulus accepted, MPa (diamond is 1.2e6; beyond this only an input error)
+MAX_MODULUS = 1e8
+#: largest bending / torsion factor accepted (relative to the solid section)
+MAX_FACTOR = 1e6
 
 
 def _first_bad(mask):
@@ -78,24 +71,34 @@ class Frame:
     def __init__(self, nodes, elements, *, radius=None, E=None, nu=None, yarn=None,
                  semi_axes=None, ref=None, periods=None, images=None,
                  contact_radius=None, prestrain=None, bending_factor=None, torsion_factor=None):
-        nodes = np.ascontiguousarray(np.asarray(nodes, dtype=float))
-        if nodes.ndim != 2 or nodes.shape[1] != 3:
-            raise InputError(f"nodes must have shape (n, 3), got {nodes.shape}")
-        bad = ~np.isfinite(nodes).all(axis=1)
-        if bad.any():
-            i = _first_bad(bad)
-            raise InputError(f"node {i} has a non-finite coordinate {nodes[i].tolist()} "
-                             f"({int(bad.sum())} such nodes)")
-        elements = np.asarray(elements)
-        if elements.ndim != 2 or elements.shape[1] != 2:
-            raise InputError(f"elements must have shape (m, 2), got {elements.shape}")
-        if elements.size and not np.issubdtype(elements.dtype, np.integer):
-            if not np.all(elements == np.round(elements)):
-                raise InputError("elements must hold integer node indices")
-        elements = np.ascontiguousarray(elements.astype(np.int64))
-        n, m = len(nodes), len(elements)
-        if m == 0:
+        self._topology(nodes, elements)
+        m = len(self.elements)
+        self._periodicity(periods, images, m)
+        self._sections(radius, semi_axes, E, nu, yarn, contact_radius, prestrain, bending_factor, torsion_factor, m)
+        self._local_frames(ref, m)
+        props = section_properties(self.a, self.b, self.nu)
+        self.A, self.Iy, self.Iz, self.J, self.k = (props[x] for x in ("A", "Iy", "Iz", "J", "k"))
+        self.Iy = np.ascontiguousarray(self.Iy * self.bending_factor)
+        self.Iz = np.ascontiguousarray(self.Iz * self.bending_factor)
+        self.J = np.ascontiguousarray(self.J * self.torsion_factor)
+        self.G = self.E / (2.0 * (1.0 + self.nu))
+
+    def _topology(self, nodes, elements):
+        raw = to_array(nodes, "nodes")
+        if raw.dtype.kind in "iuf" and raw.ndim == 2 and raw.shape[1:] == (3,):
+            bad = ~np.isfinite(raw).all(axis=1)
+            if bad.any():
+                i = _first_bad(bad)
+                raise InputError(f"node {i} has a non-finite coordinate {raw[i].tolist()} "
+                                 f"({int(bad.sum())} such nodes)")
+        nodes = as_real(nodes, "nodes", width=3, limit=MAX_COORD)
+        n = len(nodes)
+        arr = to_array(elements, "elements")
+        if arr.ndim != 2 or arr.shape[1] != 2:
+            raise InputError(f"elements must have shape (m, 2), got {np.shape(arr)}")
+        if len(arr) == 0:
             raise InputError("a frame needs at least one element")
+        elements = as_index(arr, "elements")
         out = (elements < 0) | (elements >= n)
         if out.any():
             e = _first_bad(out.any(axis=1))
@@ -104,89 +107,78 @@ class Frame:
         self.nodes = nodes
         self.elements = elements
 
-        # periodicity
+    def _periodicity(self, periods, images, m):
         if periods is None:
             periods = np.zeros((0, 3))
-        periods = np.ascontiguousarray(np.asarray(periods, dtype=float).reshape(-1, 3))
+        periods = as_real(periods, "periods", limit=MAX_COORD)
+        if periods.shape == (3,):
+            periods = periods[None]
+        if periods.ndim != 2 or periods.shape[1] != 3 or len(periods) > 3:
+            raise InputError(f"periods must have shape (k, 3) with k = 1, 2 or 3 lattice vectors (mm), got "
+                             f"{periods.shape}")
         k = len(periods)
-        if k > 3:
-            raise InputError(f"periods: at most 3 lattice vectors, got {k}")
-        if not np.isfinite(periods).all():
-            raise InputError("periods: lattice vectors must be finite")
         if k and np.linalg.matrix_rank(periods, tol=1e-9 * max(1.0, np.abs(periods).max())) < k:
             raise InputError(f"periods: the {k} lattice vectors {periods.tolist()} are not linearly independent")
         if images is None:
             if k:
                 raise InputError("images: a periodic frame needs an (m, k) integer image offset per element")
             images = np.zeros((m, 0), dtype=np.int64)
-        images = np.asarray(images)
+        images = as_index(images, "images", lo=-10 ** 6, hi=10 ** 6)
         if images.ndim == 1 and k == 1:
             images = images[:, None]
         if images.shape != (m, k):
             raise InputError(f"images must have shape ({m}, {k}), got {images.shape}")
-        if images.size and not np.all(images == np.round(images)):
-            raise InputError("images must be integers")
         self.periods = periods
-        self.images = np.ascontiguousarray(images.astype(np.int64))
+        self.images = np.ascontiguousarray(images)
+        if k and np.abs(self.element_vectors).max() > MAX_COORD:
+            raise InputError(f"images: element vectors reach {np.abs(self.element_vectors).max():.3g} mm "
+                             f"(limit {MAX_COORD:g} mm): an image offset far larger than the cell")
 
-        # sections and materials
+    def _sections(self, radius, semi_axes, E, nu, yarn, contact_radius, prestrain, bending_factor,
+                  torsion_factor, m):
+        self.yarn = per_element(0 if yarn is None else yarn, m, "yarn", index=True, lo=0, hi=2 ** 31 - 1)
+        y = self.yarn
         if semi_axes is not None:
-            sa = np.asarray(semi_axes, dtype=float)
+            sa = as_real(semi_axes, "semi_axes", limit=MAX_COORD)
             if sa.shape == (2,):
                 sa = np.broadcast_to(sa, (m, 2))
             if sa.shape != (m, 2):
                 raise InputError(f"semi_axes must have shape (2,) or ({m}, 2), got {sa.shape}")
-            self.a = np.ascontiguousarray(sa[:, 0])
-            self.b = np.ascontiguousarray(sa[:, 1])
+            self.a = per_element(sa[:, 0], m, "semi-axis a (semi_axes[:, 0])", positive=True, yarn=y)
+            self.b = per_element(sa[:, 1], m, "semi-axis b (semi_axes[:, 1])", positive=True, yarn=y)
         else:
-            r = _per_element(radius, m, "radius")
+            r = per_element(radius, m, "radius", positive=True, limit=MAX_COORD, yarn=y)
             self.a, self.b = r, r.copy()
-        self.E = _per_element(E, m, "E")
-        self.nu = _per_element(nu, m, "nu")
-        self.yarn = _per_element(0 if yarn is None else yarn, m, "yarn", dtype=np.int64)
+        self.E = per_element(E, m, "E", positive=True, limit=MAX_MODULUS, yarn=y)
+        self.nu = per_element(nu, m, "nu", lo=-1.0, hi=0.5, yarn=y)
         self.contact_radius = (np.maximum(self.a, self.b) if contact_radius is None
-                               else _per_element(contact_radius, m, "contact_radius"))
-        self.prestrain = _per_element(0.0 if prestrain is None else prestrain, m, "prestrain")
-        for name, arr in (("radius", self.a), ("radius", self.b), ("E", self.E),
-                          ("contact_radius", self.contact_radius)):
-            bad = ~(np.isfinite(arr) & (arr > 0))
-            if bad.any():
-                e = _first_bad(bad)
-                raise InputError(f"{name} of element {e} (yarn {self.yarn[e]}) must be positive and finite, "
-                                 f"got {arr[e]}")
-        bad = ~((self.nu > -1.0) & (self.nu < 0.5))
-        if bad.any():
-            e = _first_bad(bad)
-            raise InputError(f"nu of element {e} (yarn {self.yarn[e]}) must lie in (-1, 0.5), got {self.nu[e]}")
-        if not np.isfinite(self.prestrain).all():
-            e = _first_bad(~np.isfinite(self.prestrain))
-            raise InputError(f"prestrain of element {e} is not finite")
-        self.bending_factor = _per_element(1.0 if bending_factor is None else bending_factor, m, "bending_factor")
-        self.torsion_factor = _per_element(1.0 if torsion_factor is None else torsion_factor, m, "torsion_factor")
-        for name, arr in (("bending_factor", self.bending_factor), ("torsion_factor", self.torsion_factor)):
-            bad = ~(np.isfinite(arr) & (arr > 0))
-            if bad.any():
-                e = _first_bad(bad)
-                raise InputError(f"{name} of element {e} (yarn {self.yarn[e]}) must be positive and finite, "
-                                 f"got {arr[e]}")
+                               else per_element(contact_radius, m, "contact_radius", positive=True,
+                                                limit=MAX_COORD, yarn=y))
+        # an axial pre-strain of 1 would shrink the element to nothing
+        self.prestrain = per_element(0.0 if prestrain is None else prestrain, m, "prestrain", lo=-1.0, hi=1.0,
+                                     yarn=y)
+        self.bending_factor = per_element(1.0 if bending_factor is None else bending_factor, m, "bending_factor",
+                                          positive=True, limit=MAX_FACTOR, yarn=y)
+        self.torsion_factor = per_element(1.0 if torsion_factor is None else torsion_factor, m, "torsion_factor",
+                                          positive=True, limit=MAX_FACTOR, yarn=y)
 
-        # geometry checks
+    def _local_frames(self, ref, m):
         d = self.element_vectors
         L = np.linalg.norm(d, axis=1)
-        scale = max(1.0, float(np.abs(nodes).max()) if n else 1.0)
+        scale = max(1.0, float(np.abs(self.nodes).max()) if len(self.nodes) else 1.0)
         bad = L <= 1e-12 * scale
         if bad.any():
             e = _first_bad(bad)
-            raise InputError(f"element {e} (yarn {self.yarn[e]}, nodes {elements[e].tolist()}) has zero length")
+            raise InputError(f"element {e} (yarn {self.yarn[e]}, nodes {self.elements[e].tolist()}) has zero "
+                             "length")
         self._check_duplicates()
-
         e1 = d / L[:, None]
         if ref is None:
             ref = np.zeros((m, 3))
             ref[:, 2] = 1.0
             near_z = np.abs(e1[:, 2]) > 0.9
             ref[near_z] = (1.0, 0.0, 0.0)
-        ref = np.asarray(ref, dtype=float)
+        ref = as_real(ref, "ref")
         if ref.shape == (3,):
             ref = np.broadcast_to(ref, (m, 3))
         if ref.shape != (m, 3):
@@ -204,12 +196,6 @@ class Frame:
         self.length = np.ascontiguousarray(L)
         # rotation matrices: rows e1, e2, e3 (global -> local)
         self.R = np.ascontiguousarray(np.stack([e1, e2, e3], axis=1))
-        props = section_properties(self.a, self.b, self.nu)
-        self.A, self.Iy, self.Iz, self.J, self.k = (props[x] for x in ("A", "Iy", "Iz", "J", "k"))
-        self.Iy = np.ascontiguousarray(self.Iy * self.bending_factor)
-        self.Iz = np.ascontiguousarray(self.Iz * self.bending_factor)
-        self.J = np.ascontiguousarray(self.J * self.torsion_factor)
-        self.G = self.E / (2.0 * (1.0 + self.nu))
 
     # ------------------------------------------------------------------
     def _check_duplicates(self):

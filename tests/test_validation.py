@@ -1,0 +1,142 @@
+"""Every bad input to a Frame or a cell file raises InputError naming the argument (never another
+exception, never a silent acceptance), and every accepted input gives finite geometry.
+
+Property-based (hypothesis): a valid frame with one argument replaced by a value drawn from a
+catalogue of bad kinds (non-finite, complex, strings, booleans, wrong shapes, huge, non-integral
+indices, out of range) must be refused with the argument's name in the message; random numbers
+for every argument must either be refused that way or give a frame whose lengths, axes and section
+properties are finite.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import homtex
+
+NODES = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0.5, 0], [2, 1, 0.3]])
+ELEMENTS = np.array([[0, 1], [1, 2], [2, 3]])
+BASE = dict(radius=0.1, E=1000.0, nu=0.3)
+M = 3
+
+#: words that name each argument in its error message
+NAMES = {"nodes": "node", "elements": "element", "radius": "radius", "E": "E", "nu": "nu", "yarn": "yarn",
+         "semi_axes": "semi", "ref": "ref", "periods": "periods", "images": "images",
+         "contact_radius": "contact_radius", "prestrain": "prestrain", "bending_factor": "bending_factor",
+         "torsion_factor": "torsion_factor"}
+
+NON_NUMBERS = [np.nan, np.inf, -np.inf, "1.0", b"x", 1 + 2j, True, None, object(), [1.0, "a"]]
+
+
+def bad_values(arg):
+    """Bad values for one argument (the argument is replaced in a valid 3-element frame)."""
+    common = [np.nan, np.inf, -np.inf, "1", 1 + 1j, np.array([1 + 1j] * M), True, np.array([True] * M),
+              [[1.0, 2.0], [3.0]], np.zeros((2, 2)), np.ones(M + 1), {"a": 1}]
+    per = {
+        "nodes": [NODES.astype(complex), NODES[:, :2], NODES.ravel(), np.where(NODES == 1, np.nan, NODES),
+                  NODES * 1e200, "nodes", NODES.astype(str), np.array([[0, 0, 0]] * 4, dtype=object)],
+        "elements": [ELEMENTS + 0.5, np.where(ELEMENTS == 1, np.nan, ELEMENTS), ELEMENTS.astype(complex),
+                     ELEMENTS * 1e30, ELEMENTS.astype(str), ELEMENTS[:, :1], ELEMENTS + 10, -ELEMENTS - 1,
+                     np.zeros((0, 2), int), [[0, 1], [1]]],
+        "radius": [-0.1, 0.0, 1e300, np.array([0.1, -0.1, 0.1])],
+        "E": [-1.0, 0.0, 1e300],
+        "nu": [0.5, -1.0, 2.0],
+        "yarn": [1.5, np.array([0, 1.5, 2]), -1, 1e30, 2 ** 40, np.array(["a", "b", "c"])],
+        "semi_axes": [[0.1], [0.1, -0.1], np.ones((M, 3)), [[0.1, np.nan]] * M, [0.1, 1 + 1j]],
+        "ref": [[0, 0, 0], [1.0, np.nan, 0], np.ones((M, 2)), [0, 0, 1 + 1j]],
+        "contact_radius": [-0.1, 0.0, 1e300],
+        "prestrain": [1.0, -1.0, 1e300, 5.0],
+        "bending_factor": [0.0, -1.0, 1e300],
+        "torsion_factor": [0.0, -1.0, 1e300],
+    }
+    return common + per.get(arg, [])
+
+
+def periodic_bad():
+    P = np.array([[3.0, 0, 0]])
+    img = np.array([[0], [0], [1]])
+    out = []
+    for p in (np.array([3.0, 0, 0, 0, 0, 0]), np.ones((4, 3)), np.ones((1, 2)), P.astype(complex), P * 1e300,
+              np.array([[np.nan, 0, 0]]), "P", [[3.0, 0, "x"]], np.array([[1.0, 0, 0], [2.0, 0, 0]])):
+        out.append(("periods", dict(periods=p, images=img if np.size(p) == 3 else np.zeros((M, 2), int))))
+    for i in (img + 0.5, img.astype(complex), np.full((M, 1), np.nan), img * 10 ** 9, np.zeros((M, 2), int),
+              img.astype(str), None):
+        out.append(("images", dict(periods=P, images=i)))
+    return out
+
+
+CASES = [(arg, {arg: v}) for arg in NAMES if arg not in ("periods", "images") for v in bad_values(arg)]
+CASES += periodic_bad()
+
+
+def build(changes):
+    kw = dict(nodes=NODES, elements=ELEMENTS, **BASE)
+    kw.update(changes)
+    if "semi_axes" in changes:
+        kw.pop("radius")
+    return homtex.Frame(kw.pop("nodes"), kw.pop("elements"), **kw)
+
+
+@pytest.mark.parametrize("arg, changes", CASES, ids=[f"{a}-{i}" for i, (a, _) in enumerate(CASES)])
+def test_every_bad_frame_input_is_an_input_error_naming_it(arg, changes):
+    try:
+        f = build(changes)
+    except homtex.InputError as err:
+        assert NAMES[arg].lower() in str(err).lower(), (arg, str(err))
+        return
+    # accepted: only if the value was in fact fine (e.g. an integral float for yarn ids); then the
+    # frame must be consistent and finite
+    pytest.fail(f"{arg} = {changes[arg]!r} was accepted: {f}")
+
+
+def _geometry_is_finite(f):
+    for a in (f.nodes, f.length, f.R, f.A, f.Iy, f.Iz, f.J, f.k, f.G, f.element_vectors):
+        assert np.all(np.isfinite(a))
+    assert np.all(f.length > 0) and np.all(f.A > 0) and np.all(f.J > 0)
+
+
+finite_or_not = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10 ** 20, 10 ** 20),
+                          st.booleans(), st.complex_numbers(), st.text(max_size=3), st.none())
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(arg=st.sampled_from(["radius", "E", "nu", "yarn", "contact_radius", "prestrain", "bending_factor",
+                            "torsion_factor"]), value=finite_or_not)
+def test_scalar_arguments_are_refused_by_name_or_give_finite_geometry(arg, value):
+    try:
+        f = build({arg: value})
+    except homtex.InputError as err:
+        assert NAMES[arg].lower() in str(err).lower(), (arg, value, str(err))
+        return
+    _geometry_is_finite(f)
+
+
+@settings(max_examples=200, deadline=None)
+@given(coords=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=12, max_size=12))
+def test_node_coordinates_are_refused_by_name_or_give_finite_geometry(coords):
+    try:
+        f = build({"nodes": np.array(coords).reshape(4, 3)})
+    except homtex.InputError as err:
+        assert "node" in str(err).lower() or "element" in str(err).lower() or "reference" in str(err).lower()
+        return
+    _geometry_is_finite(f)
+
+
+@settings(max_examples=150, deadline=None)
+@given(el=st.lists(st.one_of(st.integers(-5, 8), st.floats(-5, 8), st.just(float("nan"))), min_size=6, max_size=6))
+def test_element_indices_are_refused_by_name_or_accepted(el):
+    try:
+        f = build({"elements": np.array(el, dtype=object if any(isinstance(x, float) for x in el) else None)
+                   .reshape(3, 2)})
+    except homtex.InputError as err:
+        assert "element" in str(err).lower(), str(err)
+        return
+    _geometry_is_finite(f)
+
+
+def test_integral_floats_are_accepted_as_indices():
+    f = build({"yarn": np.array([0.0, 1.0, 1.0]), "elements": ELEMENTS.astype(float)})
+    assert f.yarn.dtype == np.int64 and f.yarn.tolist() == [0, 1, 1]
