@@ -319,6 +319,8 @@ def load_cell(path, *, build: bool = True) -> Cell:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CellError(f"not valid TOML: {exc}", file=path) from None
+    except RecursionError:
+        raise CellError("not a cell file: arrays or tables nested too deeply to read", file=path) from None
     cell = Cell(data, p)
     if build:
         cell.build()

@@ -25,6 +25,8 @@ name                         default      meaning
 ``threads``                  ``None``     numba and BLAS threads (None: all cores)
 ``progress``                 ``False``    progress bars in long computations (the command line
                                           turns them on)
+``max_elements``             ``2000000``  largest frame a generator builds (elements); a cell file
+                                          asking for more is refused before anything is allocated
 ============================ ============ ==========================================================
 """
 
@@ -70,6 +72,7 @@ _DEFAULTS: dict[str, Any] = {
     "modulus_penalty": 5000.0,
     "threads": None,
     "progress": False,
+    "max_elements": 2_000_000,
 }
 
 _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
@@ -82,6 +85,7 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),
     "threads": (_threads, "None or an integer >= 1"),
     "progress": (_bool, "True or False"),
+    "max_elements": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
 }
 
 #: the current options (read with :func:`option`; change with :func:`set_options`)

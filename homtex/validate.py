@@ -11,10 +11,11 @@ import math
 
 import numpy as np
 
+from .config import option
 from .errors import CellError, InputError
 
-__all__ = ["check_choice", "check_int", "check_keys", "check_number", "check_seed", "check_tol", "get_int", "get_list",
-           "get_number", "get_str", "get_table", "type_name"]
+__all__ = ["check_choice", "check_int", "check_keys", "check_number", "check_seed", "check_size", "check_tol",
+           "get_int", "get_list", "get_number", "get_str", "get_table", "type_name"]
 
 
 def is_number(v) -> bool:
@@ -88,7 +89,10 @@ def get_list(d: dict, key: str, table: str, *, shape=None, integer: bool = False
     v = d[key]
     if not isinstance(v, list):
         raise CellError(f"must be an array, got {type_name(v)} {v!r}", table=table, key=key)
-    flat = list(_flatten(v))
+    try:
+        flat = list(_flatten(v))
+    except CellError as err:
+        raise CellError(err.message, table=table, key=key) from None
     kind = "integers" if integer else "numbers"
     if not all((isinstance(x, int) and not isinstance(x, bool)) if integer else is_number(x) for x in flat):
         raise CellError(f"must be an array of {kind}, got {v!r}", table=table, key=key)
@@ -108,12 +112,20 @@ def get_list(d: dict, key: str, table: str, *, shape=None, integer: bool = False
     return arr
 
 
-def _flatten(v):
-    for x in v:
-        if isinstance(x, list):
-            yield from _flatten(x)
-        else:
+def _flatten(v, max_depth: int = 16):
+    """The leaves of nested lists, depth first (iterative: no recursion limit to hit)."""
+    stack = [(iter(v), 1)]
+    while stack:
+        it, depth = stack[-1]
+        for x in it:
+            if isinstance(x, list):
+                if depth >= max_depth:
+                    raise CellError(f"arrays nested deeper than {max_depth} levels")
+                stack.append((iter(x), depth + 1))
+                break
             yield x
+        else:
+            stack.pop()
 
 
 def check_keys(d: dict, allowed, table: str) -> None:
@@ -185,3 +197,14 @@ def check_tol(value, name: str = "tol") -> float:
 def check_seed(value, name: str = "seed"):
     """None or a non-negative integer (a random seed)."""
     return None if value is None else check_int(value, name, ge=0)
+
+
+def check_size(n_elements: int, what: str) -> int:
+    """``n_elements`` if it is within the option ``max_elements`` (checked before a generator
+    allocates anything), else InputError with the number and how to raise the limit."""
+    limit = option("max_elements")
+    if n_elements > limit:
+        raise InputError(f"{what} would have {n_elements:.3g} elements, more than max_elements = {limit:g} "
+                         "(lower the resolution or repeats, or raise the limit with "
+                         "homtex.set_options(max_elements=...))")
+    return int(n_elements)

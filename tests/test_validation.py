@@ -140,3 +140,113 @@ def test_element_indices_are_refused_by_name_or_accepted(el):
 def test_integral_floats_are_accepted_as_indices():
     f = build({"yarn": np.array([0.0, 1.0, 1.0]), "elements": ELEMENTS.astype(float)})
     assert f.yarn.dtype == np.int64 and f.yarn.tolist() == [0, 1, 1]
+
+
+# ------------------------------------------------------------------ cell files
+import copy  # noqa: E402
+import math  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover
+    import tomli as tomllib
+
+CELLS = sorted((Path(__file__).resolve().parents[1] / "cells").glob("*.toml"))
+
+BAD_LEAVES = ["a string", True, False, math.nan, math.inf, -math.inf, -1, 0, 0.0, -1e300, 1e300, 10 ** 18,
+              2.5, [], [1, 2, 3], [[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]], {"x": 1}, 10_000, 1e-300]
+
+
+def _leaves(d, prefix=()):
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield from _leaves(v, prefix + (k,))
+        else:
+            yield prefix + (k,)
+
+
+def _set(d, path, value):
+    for k in path[:-1]:
+        d = d[k]
+    if value is _DELETE:
+        del d[path[-1]]
+    else:
+        d[path[-1]] = value
+
+
+_DELETE = object()
+
+
+def _frame_is_finite(cell):
+    f = cell.frame
+    for a in (f.nodes, f.length, f.R, f.A, f.Iy, f.Iz, f.J):
+        assert np.all(np.isfinite(a))
+
+
+@pytest.mark.parametrize("path", CELLS, ids=[p.stem for p in CELLS])
+def test_mutated_cell_files_raise_cell_errors_or_build_finite_frames(path):
+    """Every leaf of every shipped cell file replaced by every bad kind of value, deleted, or an
+    unknown key added next to it: a CellError/InputError naming the table or key, or a cell whose
+    frame is finite; never another exception, never longer than a few seconds."""
+    from homtex.cells import Cell
+
+    data = tomllib.loads(path.read_text())
+    outcomes = {"error": 0, "accepted": 0}
+    with homtex.set_options(max_elements=30_000):
+        for leaf in _leaves(data):
+            for value in [*BAD_LEAVES, _DELETE, "unknown"]:
+                d = copy.deepcopy(data)
+                if value == "unknown":
+                    _set(d, leaf[:-1] + ("no_such_key",), 1.0)
+                else:
+                    _set(d, leaf, value)
+                t0 = time.perf_counter()
+                try:
+                    cell = Cell(d, path)
+                    cell.build()
+                except homtex.InputError as err:
+                    outcomes["error"] += 1
+                    msg = str(err)
+                    assert any(part in msg for part in leaf) or "[" in msg, (leaf, value, msg)
+                else:
+                    outcomes["accepted"] += 1
+                    _frame_is_finite(cell)
+                assert time.perf_counter() - t0 < 10.0, (leaf, value)
+    assert outcomes["error"] > 0
+
+
+@pytest.mark.parametrize("key", ["gauge", "courses_per_cm", "thickness"])
+@pytest.mark.parametrize("value", ["12", True, [12.0], {"v": 12}])
+def test_spacer_numbers_refuse_strings_and_booleans(key, value):
+    from homtex.cells import Cell
+
+    data = tomllib.loads((Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml").read_text())
+    data["parameters"][key] = value
+    with pytest.raises(homtex.CellError, match=key):
+        Cell(data).build()
+
+
+def test_sizes_are_bounded_before_allocation():
+    from homtex.cells import Cell
+
+    data = tomllib.loads((Path(__file__).resolve().parents[1] / "cells" / "octet.toml").read_text())
+    data["parameters"]["repeat"] = [10 ** 6, 10 ** 6, 10 ** 6]
+    t0 = time.perf_counter()
+    with pytest.raises(homtex.CellError, match=r"max_elements"):
+        Cell(data).build()
+    assert time.perf_counter() - t0 < 1.0
+    spacer = tomllib.loads((Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml").read_text())
+    spacer["parameters"]["bars"]["pile"]["lapping"] = "/".join(["1-0-2-3", "2-3-1-0"] * 5000) + "//"
+    t0 = time.perf_counter()
+    with pytest.raises(homtex.CellError, match=r"max_elements"):
+        Cell(spacer).build()
+    assert time.perf_counter() - t0 < 5.0
+
+
+def test_deeply_nested_cell_file_is_a_cell_error(tmp_path):
+    p = tmp_path / "deep.toml"
+    p.write_text('[cell]\nname = "x"\ngenerator = "square"\n[parameters]\na = ' + "[" * 3000 + "1" + "]" * 3000 + "\n")
+    with pytest.raises(homtex.CellError, match="nested too deeply"):
+        homtex.load_cell(p)

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CellError, InputError
+from ..model.arrays import as_index
 from ..model.frame import Frame
-from ..validate import check_keys, get_int, get_list, get_number, get_str
+from ..validate import check_int, check_keys, check_size, get_int, get_list, get_number, get_str
 
 
 @dataclass
@@ -50,6 +51,9 @@ def neighbor_struts(basis, points, cutoff, rtol=1e-6):
             if ai < bi or (ai == bi and img[np.flatnonzero(img)[0]] > 0):
                 struts.append((ai, bi))
                 imgs.append(img)
+    if not struts:
+        raise InputError(f"no two lattice points are closer than the cutoff {cutoff:g} mm: the lattice has no "
+                         "struts (a lattice constant of 0 or beyond double precision?)")
     return np.array(struts, dtype=np.int64), np.array(imgs, dtype=np.int64).reshape(-1, k)
 
 
@@ -181,13 +185,15 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
         if cell not in GENERATORS:
             raise InputError(f"unknown lattice {cell!r}; choose from {sorted(GENERATORS)}")
         cell = GENERATORS[cell](**cell_args)
-    nel = int(elements_per_strut)
-    if nel < 1:
-        raise InputError(f"elements_per_strut must be >= 1, got {elements_per_strut}")
+    nel = check_int(elements_per_strut, "elements_per_strut", ge=1)
     k = len(cell.basis)
-    reps = np.ones(k, dtype=np.int64) if repeat is None else np.asarray(repeat, dtype=np.int64).reshape(k)
-    if np.any(reps < 1):
-        raise InputError(f"repeat must be >= 1 per lattice direction, got {reps.tolist()}")
+    reps = np.ones(k, dtype=np.int64) if repeat is None else as_index(repeat, "repeat", lo=1)
+    if reps.shape != (k,):
+        raise InputError(f"repeat must hold {k} integers (one per lattice vector), got {np.shape(repeat)}")
+    n_cells = 1
+    for r in reps.tolist():
+        n_cells *= int(r)
+    check_size(n_cells * len(cell.struts) * nel, f"a {cell.name} lattice of {reps.tolist()} cells")
     p = len(cell.points)
     cells = np.array(list(itertools.product(*[range(r) for r in reps])), dtype=np.int64).reshape(-1, k)
     strides = np.cumprod(np.concatenate([[1], reps[::-1][:-1]]))[::-1]  # row-major like product
@@ -226,6 +232,8 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
 # ----------------------------------------------------------------------------------
 # cell-file builders (see homtex.cells): build(parameters, yarns, resolution) -> (Frame, info)
 _COMMON = ("repeat", "yarn", "waviness")
+#: largest lattice constant a cell file may give, mm
+MAX_LATTICE = 1e6
 
 
 def _pick_yarn(parameters, yarns, table="parameters"):
@@ -269,8 +277,8 @@ def build_honeycomb(parameters: dict, yarns: dict, resolution: dict):
 
     t = "parameters"
     check_keys(parameters, ("h", "l", "theta", *_COMMON), t)
-    h = get_number(parameters, "h", t, gt=0)
-    l_ = get_number(parameters, "l", t, gt=0)
+    h = get_number(parameters, "h", t, gt=0, le=MAX_LATTICE)
+    l_ = get_number(parameters, "l", t, gt=0, le=MAX_LATTICE)
     theta = get_number(parameters, "theta", t, gt=-90, lt=90)
     if theta == 0:
         raise CellError("must be non-zero (theta = 0 collapses the cell: the lattice vectors are "
@@ -285,7 +293,7 @@ def _spacing_builder(gen, doc):
     def build(parameters: dict, yarns: dict, resolution: dict):
 
         check_keys(parameters, ("a", *_COMMON), "parameters")
-        a = get_number(parameters, "a", "parameters", gt=0)
+        a = get_number(parameters, "a", "parameters", gt=0, le=MAX_LATTICE)
         return _build(gen(a), parameters, yarns, resolution)
     build.__doc__ = (f"{doc} from a cell file. [parameters]: a (strut spacing, mm), optional "
                      f"repeat, yarn, waviness. [resolution]: elements_per_strut.")

@@ -77,9 +77,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..errors import InputError
+from ..errors import CellError, InputError
 from ..model.frame import Frame
 from ..model.sections import YarnType, yarn_fields
+from ..validate import check_keys, check_size, get_int, get_number, get_str, get_table
 from .curves import catmull_rom_periodic, overlap_summary, reference_vectors, wrap_chain, yarn_overlaps
 from .lapping import Bar, as_bar, lcm, parse_lapping, parse_threading
 
@@ -420,6 +421,9 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
     w = INCH / gauge
     cs = 10.0 / cpc
     bar_list, parsed, threads, C, W = _parse_bars(bars, yarns)
+    # every yarn visits at most two layers per course: <= 2 loops of 6 points and 2 pile legs
+    n_yarns = sum(sum(1 for g in range(W) if threads[b.name][g % len(threads[b.name])]) for b in bar_list)
+    check_size(n_yarns * C * 2 * (6 + nleg) * eps, f"a spacer cell of {W} wales x {C} courses")
     Lx, Ly = W * w, C * cs
     periods = np.array([[Lx, 0.0, 0.0], [0.0, Ly, 0.0]])
     levels = _levels(bar_list, parsed, yarns, sh["clearance"])
@@ -516,23 +520,27 @@ def build_cell(parameters: dict, yarns: dict[str, YarnType], resolution: dict) -
     (frame, info) as :func:`spacer_fabric`.
     """
     p = dict(parameters)
-    known = {"gauge", "courses_per_cm", "thickness", "bars", "shape", "seam", "bond_distance"}
-    unknown = sorted(set(p) - known)
-    if unknown:
-        raise InputError(f"[parameters]: unknown key(s) {unknown} for generator 'spacer'; known: {sorted(known)}")
-    for key in ("gauge", "courses_per_cm", "thickness", "bars"):
-        if key not in p:
-            raise InputError(f"[parameters]: missing key {key!r} for generator 'spacer'")
-    bars = {k: v for k, v in p["bars"].items()} if isinstance(p["bars"], dict) else p["bars"]
-    if isinstance(bars, dict):
-        for name, spec in bars.items():
-            if isinstance(spec, dict) and spec.get("yarn") == (p.get("seam") or {}).get("yarn"):
-                raise InputError(f"bar {name!r}: yarn {spec.get('yarn')!r} is the seam's stitch yarn")
+    t = "parameters"
+    check_keys(p, ("gauge", "courses_per_cm", "thickness", "bars", "shape", "seam", "bond_distance"), t)
+    gauge = get_number(p, "gauge", t, gt=0, le=100)               # needles per inch
+    cpc = get_number(p, "courses_per_cm", t, gt=0, le=100)
+    thickness = get_number(p, "thickness", t, gt=0, le=1000)      # mm
+    bond = get_number(p, "bond_distance", t, default=0.0, ge=0, le=100)
+    bars = get_table(p, "bars", t)
+    for name, spec in bars.items():
+        spec = get_table(bars, name, f"{t}.bars")
+        if spec.get("yarn") == (p.get("seam") or {}).get("yarn"):
+            raise CellError(f"yarn {spec.get('yarn')!r} is the seam's stitch yarn", table=f"{t}.bars.{name}",
+                            key="yarn")
+        for key in ("lapping", "yarn", "bed", "threading", "system"):
+            if key in spec:
+                get_str(spec, key, f"{t}.bars.{name}")
+    shape = get_table(p, "shape", t, required=False)
+    for key in shape:
+        get_number(shape, key, f"{t}.shape")
     res = dict(resolution or {})
-    unknown = sorted(set(res) - {"elements_per_segment", "pile_segments"})
-    if unknown:
-        raise InputError(f"[resolution]: unknown key(s) {unknown}; known: elements_per_segment, pile_segments")
-    return spacer_fabric(p["gauge"], p["courses_per_cm"], p["thickness"], p["bars"], yarns,
-                         elements_per_segment=res.get("elements_per_segment", 4),
-                         pile_segments=res.get("pile_segments", 4), shape=p.get("shape"),
-                         bond_distance=float(p.get("bond_distance", 0.0)))
+    check_keys(res, ("elements_per_segment", "pile_segments"), "resolution")
+    eps = get_int(res, "elements_per_segment", "resolution", default=4, ge=1)
+    nleg = get_int(res, "pile_segments", "resolution", default=4, ge=1)
+    return spacer_fabric(gauge, cpc, thickness, bars, yarns, elements_per_segment=eps, pile_segments=nleg,
+                         shape=shape or None, bond_distance=bond)

@@ -22,6 +22,8 @@ ELEMENT_FIELDS = ("semi_axes", "E", "nu", "yarn", "ref", "contact_radius", "pres
 FIELD_DEFAULTS = {"prestrain": 0.0, "bending_factor": 1.0, "torsion_factor": 1.0}
 #: largest Young's modulus accepted, MPa (diamond is 1.2e6; beyond this only an input error)
 MAX_MODULUS = 1e8
+#: smallest radius accepted, mm (below it r^4 underflows)
+MIN_RADIUS = 1e-9
 #: largest bending / torsion factor accepted (relative to the solid section)
 MAX_FACTOR = 1e6
 
@@ -144,16 +146,16 @@ class Frame:
                 sa = np.broadcast_to(sa, (m, 2))
             if sa.shape != (m, 2):
                 raise InputError(f"semi_axes must have shape (2,) or ({m}, 2), got {sa.shape}")
-            self.a = per_element(sa[:, 0], m, "semi-axis a (semi_axes[:, 0])", positive=True, yarn=y)
-            self.b = per_element(sa[:, 1], m, "semi-axis b (semi_axes[:, 1])", positive=True, yarn=y)
+            self.a = per_element(sa[:, 0], m, "semi-axis a (semi_axes[:, 0])", lo=MIN_RADIUS, yarn=y)
+            self.b = per_element(sa[:, 1], m, "semi-axis b (semi_axes[:, 1])", lo=MIN_RADIUS, yarn=y)
         else:
-            r = per_element(radius, m, "radius", positive=True, limit=MAX_COORD, yarn=y)
+            r = per_element(radius, m, "radius", positive=True, lo=MIN_RADIUS, limit=MAX_COORD, yarn=y)
             self.a, self.b = r, r.copy()
         self.E = per_element(E, m, "E", positive=True, limit=MAX_MODULUS, yarn=y)
         self.nu = per_element(nu, m, "nu", lo=-1.0, hi=0.5, yarn=y)
         self.contact_radius = (np.maximum(self.a, self.b) if contact_radius is None
                                else per_element(contact_radius, m, "contact_radius", positive=True,
-                                                limit=MAX_COORD, yarn=y))
+                                                lo=MIN_RADIUS, limit=MAX_COORD, yarn=y))
         # an axial pre-strain of 1 would shrink the element to nothing
         self.prestrain = per_element(0.0 if prestrain is None else prestrain, m, "prestrain", lo=-1.0, hi=1.0,
                                      yarn=y)
