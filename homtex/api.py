@@ -14,8 +14,10 @@ from .contact.options import Contact
 from .contact.solver import solve_contact
 from .errors import InputError
 from .fem.assembly import Assembler
+from .model.arrays import as_real
 from .model.frame import Frame
 from .model.results import StaticResult
+from .validate import check_choice, check_int, check_number
 
 __all__ = ["compress", "solve_static"]
 
@@ -66,7 +68,9 @@ def _frame_of(obj):
 
 
 def _targets(v, steps, name):
-    arr = np.atleast_1d(np.asarray(v, dtype=float))
+    arr = np.atleast_1d(as_real(v, name))
+    if arr.ndim != 1 or arr.size > 100_000:
+        raise InputError(f"{name} must be a number or a 1-D array of at most 100000 levels, got shape {arr.shape}")
     if arr.size == 1:
         if not (np.isfinite(arr[0]) and arr[0] > 0):
             raise InputError(f"{name} must be positive, got {v!r}")
@@ -122,21 +126,26 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     "failed" and ``attrs["status_detail"]`` says why ("ok" otherwise).
     """
     frame, groups, info = _frame_of(cell_or_frame)
-    if control not in ("displacement", "force"):
-        raise InputError(f"control must be 'displacement' or 'force', got {control!r}")
+    check_choice(control, "control", ("displacement", "force"))
     contact = Contact() if contact is None else contact
     if not isinstance(contact, Contact):
         raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
-    if int(steps) != steps or steps < 1:
-        raise InputError(f"steps must be a positive integer, got {steps!r}")
-    if geometry not in GEOMETRIES:
-        raise InputError(f"geometry must be 'linear' or 'nonlinear', got {geometry!r}")
-    if not (np.isfinite(stabilize) and 0.0 <= stabilize < 1.0):
-        raise InputError(f"stabilize must lie in [0, 1) (fraction of the diagonal stiffness), got {stabilize!r}")
-    if int(max_cuts) != max_cuts or max_cuts < 0:
-        raise InputError(f"max_cuts must be a non-negative integer, got {max_cuts!r}")
+    steps = check_int(steps, "steps", ge=1, le=100_000)
+    check_choice(geometry, "geometry", GEOMETRIES)
+    stabilize = check_number(stabilize, "stabilize", ge=0.0, lt=1.0)
+    max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=30)
+    if progress is not None and not isinstance(progress, (bool, np.bool_)):
+        raise InputError(f"progress must be True or False, got {progress!r}")
+    if thickness is not None:
+        thickness = check_number(thickness, "thickness", gt=0.0, le=1e6)
+    if area is not None:
+        area = check_number(area, "area", gt=0.0, le=1e12)
+    if fixed is not None and not isinstance(fixed, dict):
+        raise InputError("fixed must be a dict node -> 'all' | [dofs] | {dof: value}")
     test = CompressionTest.build(frame, thickness=thickness, area=area, fixed=fixed, groups=groups, info=info)
     if control == "displacement":
+        if pressure is not None:
+            raise InputError("compress: 'pressure' is for control='force'; displacement control takes 'strain'")
         if strain is None:
             raise InputError("compress: 'strain' (final compression strain) is required for displacement control")
         targets = _targets(strain, steps, "strain")
@@ -145,6 +154,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     else:
         if pressure is None:
             raise InputError("compress: 'pressure' (kPa) is required for control='force'")
+        if strain is not None:
+            raise InputError("compress: 'strain' is for control='displacement'; force control takes 'pressure'")
         targets = _targets(pressure, steps, "pressure")
     return run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
                            tol=option("tol", tol), maxiter=maxiter, max_cuts=int(max_cuts),

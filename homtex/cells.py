@@ -279,24 +279,40 @@ def _plain(v):
     return v
 
 
+def _cell_folders() -> list[Path]:
+    import sys
+
+    return [Path(__file__).resolve().parents[1] / "cells", Path(sys.prefix) / "share" / "homtex" / "cells"]
+
+
+def shipped_cells() -> list[str]:
+    """Names of the cell files that come with homtex (``load_cell(name)`` finds them)."""
+    names = set()
+    for folder in _cell_folders():
+        if folder.is_dir():
+            names.update(p.stem for p in folder.glob("*.toml"))
+    return sorted(names)
+
+
 def find_cell(name) -> Path:
     """Path of a cell file: ``name`` itself if it exists, else a shipped cell of that name
     (``"spacer_20mm"`` or ``"spacer_20mm.toml"``) from the source tree's ``cells/`` or the
     installed copy in ``<prefix>/share/homtex/cells``."""
-    import sys
-
+    if not isinstance(name, (str, Path)):
+        raise CellError(f"a cell is a file path or the name of a shipped cell (a string), got {name!r}")
     p = Path(name)
+    if p.is_dir():
+        raise CellError("is a folder, not a cell file (.toml)", file=p)
     if p.exists():
         return p
     fname = p.name if p.suffix == ".toml" else p.name + ".toml"
-    for folder in (Path(__file__).resolve().parents[1] / "cells",
-                   Path(sys.prefix) / "share" / "homtex" / "cells"):
+    for folder in _cell_folders():
         if (folder / fname).exists():
             return folder / fname
     return p
 
 
-def load_cell(path, *, build: bool = True) -> Cell:
+def load_cell(path: str | Path, *, build: bool = True) -> Cell:
     """Read, validate and (by default) build a cell file.
 
     Parameters
@@ -308,11 +324,14 @@ def load_cell(path, *, build: bool = True) -> Cell:
     ------
     CellError (an InputError) naming the file, table and key of the culprit.
     """
+    if not isinstance(build, (bool, np.bool_)):
+        raise CellError(f"build must be True or False, got {build!r}")
     p = find_cell(path)
     try:
         text = p.read_bytes().decode("utf-8")
     except FileNotFoundError:
-        raise CellError("no such file", file=path) from None
+        raise CellError(f"no such file, and no shipped cell of that name (shipped cells: {', '.join(shipped_cells())})",
+                        file=path) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise CellError(f"cannot read: {exc}", file=path) from None
     try:

@@ -57,6 +57,7 @@ from .errors import InputError
 from .lookup import Lookup
 from .model.results import Status, set_status
 from .seams import seam_profile
+from .validate import check_choice, check_int, check_number, check_seed
 
 __all__ = ["macro_curve", "column_heights", "unseamed_law"]
 
@@ -185,20 +186,25 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     ``column_x``; attrs: H0, cushion heights, model settings, ``seconds``.
     """
     t0 = time.perf_counter()
-    if pre_stress not in PRE_STRESS:
-        raise InputError(f"macro_curve: pre_stress must be one of {PRE_STRESS}, got {pre_stress!r}")
-    if slack_travel is not None and not float(slack_travel) >= 0:  # inf allowed: "held"
-        raise InputError(f"macro_curve: slack_travel must be a length >= 0 (mm), got {slack_travel!r}")
-    if not (0 < strain < 1):
-        raise InputError(f"macro_curve: strain must be in (0, 1), got {strain!r}")
-    if not plate_area > 0:
-        raise InputError(f"macro_curve: plate_area must be positive (mm^2), got {plate_area!r}")
-    if int(n_columns) != n_columns or n_columns < 1 or int(steps) != steps or steps < 2:
-        raise InputError(f"macro_curve: n_columns >= 1 and steps >= 2 must be integers, got {n_columns!r}, {steps!r}")
-    if height_scatter < 0:
-        raise InputError(f"macro_curve: height_scatter must be >= 0 mm, got {height_scatter!r}")
-    if seam_distance is not None and not seam_distance > 0:
-        raise InputError(f"macro_curve: seam_distance must be positive (mm), got {seam_distance!r}")
+    check_choice(pre_stress, "pre_stress", PRE_STRESS)
+    if slack_travel is not None:   # inf allowed: the "held" limit
+        slack_travel = check_number(slack_travel, "slack_travel", ge=0.0, finite=False)
+    strain = check_number(strain, "strain", gt=0.0, lt=1.0)
+    plate_area = check_number(plate_area, "plate_area", gt=0.0, le=1e12)
+    n_columns = check_int(n_columns, "n_columns", ge=1, le=10 ** 6)
+    steps = check_int(steps, "steps", ge=2, le=10 ** 6)
+    height_scatter = check_number(height_scatter, "height_scatter", ge=0.0, le=1e3)
+    seam_offset = check_number(seam_offset, "seam_offset", ge=-1e6, le=1e6)
+    seed = check_seed(seed)
+    if seam_distance is not None:
+        seam_distance = check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
+    elif profile is not None:
+        raise InputError("macro_curve: a profile needs its seam_distance (mm); without seams give neither")
+    if thickness is not None:
+        thickness = check_number(thickness, "thickness", gt=0.0, le=1e4)
+    for name, opts in (("compress_options", compress_options), ("profile_options", profile_options)):
+        if opts is not None and not isinstance(opts, dict):
+            raise InputError(f"{name} must be a dict of keyword arguments, got {type(opts).__name__}")
     t_sub = 0.0
     if curve is None:
         if cell is None:

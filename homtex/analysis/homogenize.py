@@ -27,6 +27,7 @@ from ..errors import InputError, SolverError
 from ..fem.periodic import pair_work_kernel
 from ..linalg.multirhs import solve_many
 from ..model.frame import Frame
+from ..validate import check_choice, check_int
 from .periodic import UNITS, _component_index, _forces, _Operator, cell_measure, unit_strains, voigt_components
 
 __all__ = ["Homogenization", "homogenize"]
@@ -190,6 +191,11 @@ def homogenize(frame: Frame, *, solver: str | None = None, tol: float | None = N
         raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
     solver = option("homogenize_solver", solver)
     tol = option("tol", tol)
+    check_choice(nullspace, "nullspace", ("rigid", "translations"))
+    if not isinstance(batched, (bool, np.bool_)):
+        raise InputError(f"batched must be True or False, got {batched!r}")
+    if maxiter is not None:
+        check_int(maxiter, "maxiter", ge=1)
     t_start = time.perf_counter()
     comps = voigt_components(frame)
     free_idx = _component_index(frame, free)

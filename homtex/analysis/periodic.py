@@ -126,7 +126,11 @@ def unit_strains(frame: Frame) -> np.ndarray:
 def _component_index(frame, names, what="free") -> list:
     comps = voigt_components(frame)
     out = []
-    for x in ([] if names is None else list(names)):
+    if names is not None and not isinstance(names, (list, tuple, np.ndarray, str)):
+        raise InputError(f"{what} must be a list of strain components (names such as '22' or indices), got {names!r}")
+    for x in ([] if names is None else [names] if isinstance(names, str) else list(names)):
+        if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, np.integer, str)):
+            raise InputError(f"{what}: strain components are names such as '22' or indices, got {x!r}")
         if isinstance(x, (int, np.integer)):
             if not 0 <= int(x) < len(comps):
                 raise InputError(f"{what}: component index {x} is outside 0..{len(comps) - 1} "

@@ -90,6 +90,9 @@ class CompressionTest:
         H0 = float(thickness) if thickness is not None else z_hi - z_lo
         if not H0 > 0:
             raise InputError(f"thickness must be positive, got {thickness!r}")
+        if H0 < 0.5 * (z_hi - z_lo):
+            raise InputError(f"thickness {H0:g} mm is below half the yarns' extent {z_hi - z_lo:.4g} mm: the top "
+                             "plate would start deep inside the fabric (give the plate distance in mm)")
         area_source = "given"
         if area is None:
             if frame.dim_periodic == 2:

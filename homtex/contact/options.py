@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..validate import check_choice, check_int, check_number
 
 __all__ = ["Contact", "ENFORCEMENTS", "STRATEGIES"]
 
@@ -69,30 +70,27 @@ class Contact:
     max_forward_error: float = 1e-6
 
     def __post_init__(self):
-        if self.strategy not in STRATEGIES:
-            raise InputError(f"Contact option 'strategy' must be one of {STRATEGIES}, got {self.strategy!r}")
-        if self.enforcement not in ENFORCEMENTS:
-            raise InputError(f"Contact option 'enforcement' must be one of {ENFORCEMENTS}, "
-                             f"got {self.enforcement!r}")
-        if self.penalty is not None and not (np.isfinite(self.penalty) and self.penalty > 0):
-            raise InputError(f"Contact option 'penalty' must be a positive stiffness (N/mm), got {self.penalty!r}")
-        if not (0.0 < self.removal_fraction <= 1.0):
-            raise InputError(f"Contact option 'removal_fraction' must lie in (0, 1], got {self.removal_fraction!r}")
-        if self.margin is not None and not (np.isfinite(self.margin) and self.margin >= 0):
-            raise InputError(f"Contact option 'margin' must be >= 0 (mm), got {self.margin!r}")
-        if self.exclude_hops is not None and (int(self.exclude_hops) != self.exclude_hops or self.exclude_hops < 1):
-            raise InputError(f"Contact option 'exclude_hops' must be an integer >= 1, got {self.exclude_hops!r}")
-        for name in ("gap_tol", "max_penetration", "detect_tol"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise InputError(f"Contact option '{name}' must be positive, got {v!r}")
+        def named(name):
+            return f"Contact option '{name}'"
+
+        check_choice(self.strategy, named("strategy"), STRATEGIES)
+        check_choice(self.enforcement, named("enforcement"), ENFORCEMENTS)
+        if self.penalty is not None:
+            self.penalty = check_number(self.penalty, named("penalty") + " (N/mm)", gt=0.0, le=1e15)
+        self.removal_fraction = check_number(self.removal_fraction, named("removal_fraction"), gt=0.0, le=1.0)
+        if self.margin is not None:
+            self.margin = check_number(self.margin, named("margin") + " (mm)", ge=0.0, le=1e6)
+        if self.exclude_hops is not None:
+            self.exclude_hops = check_int(self.exclude_hops, named("exclude_hops"), ge=1)
+        for name in ("gap_tol", "max_penetration", "detect_tol", "reuse_tol", "max_forward_error"):
+            setattr(self, name, check_number(getattr(self, name), named(name), gt=0.0))
+        self.penalty_growth_max = check_number(self.penalty_growth_max, named("penalty_growth_max"), ge=1.0)
         for name in ("max_iter", "max_updates", "detect_rounds"):
-            v = getattr(self, name)
-            if int(v) != v or v < 1:
-                raise InputError(f"Contact option '{name}' must be a positive integer, got {v!r}")
-        if self.initial_overlap not in ("touch", "resolve"):
-            raise InputError(f"Contact option 'initial_overlap' must be 'touch' or 'resolve', "
-                             f"got {self.initial_overlap!r}")
+            setattr(self, name, check_int(getattr(self, name), named(name), ge=1, le=10 ** 6))
+        if not isinstance(self.reuse_amg, (bool, np.bool_)):
+            raise InputError(f"{named('reuse_amg')} must be True or False, got {self.reuse_amg!r}")
+        check_choice(self.initial_overlap, named("initial_overlap"), ("touch", "resolve"))
+        self.friction = check_number(self.friction, named("friction"), ge=0.0)
         if self.friction != 0.0:
-            raise InputError(f"Contact option 'friction' = {self.friction!r}: Coulomb friction is not yet "
-                             "implemented (frictionless contact only, friction=0)")
+            raise InputError(f"{named('friction')} = {self.friction!r}: Coulomb friction is not "
+                             "implemented for the linear contact solve (frictionless contact only, friction=0)")

@@ -9,7 +9,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
+from ..model.arrays import MAX_COORD, as_index, as_real
 from ..model.frame import Frame
+from ..validate import check_number
 
 __all__ = ["periodize", "tile_frame"]
 
@@ -84,14 +86,18 @@ def periodize(frame: Frame, box, *, axes=None, tol: float = 1e-6) -> Frame:
     """
     if frame.dim_periodic:
         raise InputError("periodize: the frame is already periodic")
-    box = np.asarray(box, dtype=float)
-    if box.shape != (2, 3) or not np.isfinite(box).all():
+    if not isinstance(frame, Frame):
+        raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
+    box = as_real(box, "box", limit=MAX_COORD)
+    if box.shape != (2, 3):
         raise InputError(f"box must be a (2, 3) array [lo, hi], got shape {box.shape}")
+    tol = check_number(tol, "tol (pairing tolerance, mm)", gt=0.0, le=MAX_COORD)
     lo, hi = box
     if axes is None:
         axes = [a for a in range(3) if hi[a] - lo[a] > tol]
-    axes = sorted(int(a) for a in axes)
-    if not axes or any(a not in (0, 1, 2) for a in axes):
+    axes = sorted(as_index(np.atleast_1d(axes) if not isinstance(axes, str) else axes, "axes", ndim=1,
+                           lo=0, hi=2).tolist())
+    if not axes or len(set(axes)) != len(axes):
         raise InputError(f"periodize: periodic axes must be a non-empty subset of 0, 1, 2, got {axes}")
     for a in axes:
         if not hi[a] - lo[a] > tol:

@@ -18,6 +18,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
+from ..validate import check_number
+from .arrays import MAX_COORD, as_real
 from .topology import check_held, components
 
 __all__ = ["DOF_NAMES", "Plate", "Scene", "default_pins", "parse_fixed", "parse_loads", "periodic_pins"]
@@ -25,20 +27,24 @@ __all__ = ["DOF_NAMES", "Plate", "Scene", "default_pins", "parse_fixed", "parse_
 DOF_NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
 
 
-def _node_index(node, n):
+def _node_index(node, n, what):
     try:
+        if isinstance(node, (bool, np.bool_, str, bytes)):
+            raise TypeError
         i = int(node)
-    except (TypeError, ValueError):
-        raise InputError(f"node {node!r} is not an integer index") from None
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{what}: node {node!r} is not an integer index") from None
     if i != node or not (0 <= i < n):
-        raise InputError(f"node {node!r} is outside 0..{n - 1}")
+        raise InputError(f"{what}: node {node!r} is outside 0..{n - 1}")
     return i
 
 
 def _dof_index(node, dof):
     try:
+        if isinstance(dof, (bool, np.bool_, str, bytes)):
+            raise TypeError
         d = int(dof)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"node {node}: DOF {dof!r} is not an integer 0..5") from None
     if d != dof or not (0 <= d <= 5):
         raise InputError(f"node {node}: DOF {dof!r} is not in 0..5 ({', '.join(DOF_NAMES)})")
@@ -54,7 +60,7 @@ def parse_fixed(fixed, n_nodes: int):
     if not isinstance(fixed, Mapping):
         raise InputError("fixed must be a dict node -> 'all' | [dofs] | {dof: value}")
     for node, spec in fixed.items():
-        i = _node_index(node, n_nodes)
+        i = _node_index(node, n_nodes, "fixed")
         if isinstance(spec, str):
             if spec != "all":
                 raise InputError(f"fixed[{node}]: unknown support {spec!r} (use 'all', a DOF list or a dict)")
@@ -62,13 +68,12 @@ def parse_fixed(fixed, n_nodes: int):
         elif isinstance(spec, Mapping):
             for dof, v in spec.items():
                 d = _dof_index(node, dof)
-                v = float(v)
-                if not np.isfinite(v):
-                    raise InputError(f"fixed[{node}][{dof}]: prescribed value {v} is not finite")
+                v = float(as_real(v, f"fixed[{node}][{dof}] (prescribed value)", ndim=0, limit=MAX_COORD))
                 mask[6 * i + d] = True
                 vals[6 * i + d] = v
         else:
-            for dof in np.atleast_1d(spec).tolist():
+            dofs = spec if isinstance(spec, (list, tuple, np.ndarray)) else [spec]
+            for dof in (dofs.tolist() if isinstance(dofs, np.ndarray) else dofs):
                 mask[6 * i + _dof_index(node, dof)] = True
     return mask, vals
 
@@ -81,12 +86,10 @@ def parse_loads(loads, n_nodes: int) -> np.ndarray:
     if not isinstance(loads, Mapping):
         raise InputError("loads must be a dict node -> 6 numbers (Fx, Fy, Fz, Mx, My, Mz)")
     for node, v in loads.items():
-        i = _node_index(node, n_nodes)
-        v = np.asarray(v, dtype=float).ravel()
+        i = _node_index(node, n_nodes, "loads")
+        v = as_real(v, f"loads[{node}]").ravel()
         if v.shape != (6,):
             raise InputError(f"loads[{node}] must have 6 numbers (Fx, Fy, Fz, Mx, My, Mz), got {v.size}")
-        if not np.isfinite(v).all():
-            raise InputError(f"loads[{node}] is not finite: {v.tolist()}")
         f[6 * i:6 * i + 6] += v
     return f
 
@@ -116,23 +119,29 @@ class Plate:
     name: str = ""
 
     def __post_init__(self):
-        if self.normal not in (1, -1):
+        if isinstance(self.normal, (bool, np.bool_)) or self.normal not in (1, -1):
             raise InputError(f"Plate.normal must be +1 (yarns above) or -1 (yarns below), got {self.normal!r}")
-        if not np.isfinite(float(self.z)):
-            raise InputError(f"Plate.z must be finite, got {self.z!r}")
+        self.z = check_number(self.z, "Plate.z (mm)", ge=-MAX_COORD, le=MAX_COORD)
+        if self.area is not None and self.pressure is None:
+            raise InputError("Plate.area (mm^2) goes with Plate.pressure; give force (N) alone otherwise")
         if self.pressure is not None:
             if self.force is not None:
                 raise InputError("Plate: give either 'force' or 'pressure' (with 'area'), not both")
-            if self.area is None or not (float(self.area) > 0):
+            pressure = check_number(self.pressure, "Plate.pressure (kPa)")
+            if self.area is None:
                 raise InputError("Plate.pressure needs a positive 'area' (mm^2)")
-            self.force = float(self.pressure) * float(self.area) * 1e-3
+            area = check_number(self.area, "Plate.area (mm^2)", gt=0.0)
+            self.force = pressure * area * 1e-3
         if self.force is not None and self.displacement is not None:
             raise InputError("Plate: give either 'displacement' (displacement control) or 'force' "
                              "(force control), not both")
-        for name in ("displacement", "force"):
-            v = getattr(self, name)
-            if v is not None and not np.isfinite(float(v)):
-                raise InputError(f"Plate.{name} must be finite, got {v!r}")
+        if self.displacement is not None:
+            self.displacement = check_number(self.displacement, "Plate.displacement (mm)", ge=-MAX_COORD,
+                                             le=MAX_COORD)
+        if self.force is not None:
+            self.force = check_number(self.force, "Plate.force (N)", ge=-1e12, le=1e12)
+        if not isinstance(self.name, str):
+            raise InputError(f"Plate.name must be a string, got {self.name!r}")
 
     @property
     def force_controlled(self) -> bool:

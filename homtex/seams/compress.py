@@ -21,6 +21,7 @@ from ..geometry.seam import seam_cell
 from ..model.results import Status, set_status
 from ..model.scene import Plate
 from ..output.datasets import curve_dataset
+from ..validate import check_int, check_number
 from .foundation import seam_table
 from .measure import measure_profile
 from .yarn import SeamSolver
@@ -72,10 +73,17 @@ def seam_compression(cell: Cell, *, seam_distance: float | None, strain: float =
     stitch_plate_contacts, active_contacts; attrs status (and status_detail), thickness_mm (H0), area_mm2,
     seam_distance_mm, cushion_height_mm (of the sewn state), seconds.
     """
-    if not (0.0 < float(strain) < 1.0):
-        raise InputError(f"strain must lie in (0, 1), got {strain!r}")
-    if int(steps) != steps or steps < 1:
-        raise InputError(f"steps must be a positive integer, got {steps!r}")
+    strain = check_number(strain, "strain", gt=0.0, lt=1.0)
+    steps = check_int(steps, "steps", ge=1, le=10_000)
+    ramp_steps = check_int(ramp_steps, "ramp_steps", ge=1, le=10_000)
+    if seam_distance is not None:
+        check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
+    if prestrain is not None:
+        check_number(prestrain, "prestrain", ge=0.0, lt=1.0)
+    if not isinstance(tension_only, (bool, np.bool_)):
+        raise InputError(f"tension_only must be True or False, got {tension_only!r}")
+    if contact is not None and not isinstance(contact, Contact):
+        raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
     t0 = time.perf_counter()
     if seam_distance is None:
         ds = compress(cell, strain=strain, steps=steps, contact=Contact() if contact is None else contact)

@@ -42,6 +42,7 @@ from ..config import option
 from ..contact.options import Contact
 from ..errors import InputError
 from ..model.results import Status
+from ..validate import check_int, check_number
 
 __all__ = ["SLACK_LONG_NAME", "calibrate_layer_rigidity", "fabric_modulus", "foundation_profile", "layer_rigidity",
            "seam_table",
@@ -164,20 +165,17 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
     stitch and layer), ``prestrain``; attrs: model, foundation modulus, rigidity.
     """
     seam = seam_table(cell)
-    try:
-        d = float(seam_distance)
-    except (TypeError, ValueError):
-        raise InputError(f"seam_distance must be a number (mm), got {seam_distance!r}") from None
-    if not (math.isfinite(d) and d > 0):
-        raise InputError(f"seam_distance must be positive (mm), got {seam_distance!r}")
+    d = check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
+    points = check_int(points, "points", ge=2, le=10 ** 6)
+    if not isinstance(exact_wales, (bool, np.bool_)):
+        raise InputError(f"exact_wales must be True or False, got {exact_wales!r}")
     w = cell.info["wale_spacing"]
     if exact_wales and abs(d / w - round(d / w)) > 1e-6:
         raise InputError(f"seam_distance {d:g} mm is not a multiple of the wale spacing {w:.6g} mm "
                          f"({d / w:.4g} wales); a seam cell needs a whole number of wales "
                          f"(e.g. {round(d / w) * w:.6g} mm)")
-    eps0 = float(seam.get("foundation_prestrain", 0.0)) if prestrain is None else float(prestrain)
-    if not (0.0 <= eps0 < 1.0):
-        raise InputError(f"prestrain must lie in [0, 1), got {prestrain!r}")
+    eps0 = check_number(seam.get("foundation_prestrain", 0.0) if prestrain is None else prestrain, "prestrain",
+                        ge=0.0, lt=1.0)
     s = float(seam.get("stitch_length", 4.0))
     yname = seam.get("yarn", "stitch")
     if yname not in cell.yarns:

@@ -12,8 +12,8 @@ does not reproduce is measured in docs/seams.md.
 
 from __future__ import annotations
 
+import inspect
 import logging
-import math
 import time
 
 import numpy as np
@@ -30,6 +30,7 @@ from ..errors import InputError, SolverError
 from ..geometry.seam import seam_cell
 from ..model.results import Status, set_status
 from ..model.scene import default_pins
+from ..validate import check_choice, check_int, check_number
 from .foundation import SLACK_LONG_NAME, foundation_profile, seam_table
 from .measure import measure_profile, thread_escape
 
@@ -134,8 +135,10 @@ class SeamSolver:
         back after a success). ``time_limit`` (s): stop with a SolverError once it is exceeded
         (the accepted steps are kept). Returns the list of (alpha, contact iterations, active
         contacts) of the accepted steps."""
-        if int(steps) != steps or steps < 1:
-            raise InputError(f"steps must be a positive integer, got {steps!r}")
+        steps = check_int(steps, "steps", ge=1, le=10_000)
+        max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=20)
+        if time_limit is not None:
+            check_number(time_limit, "time_limit", gt=0.0)
         if self.alpha >= 1.0 - 1e-12:
             return self.history
         try:
@@ -183,11 +186,21 @@ def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
     (effective, mm); attrs status ("ok" or the failure), timings, sizes, contact statistics.
     """
     seam = seam_table(cell)
-    eps0 = float(seam.get("prestrain", 0.0)) if prestrain is None else float(prestrain)
-    if not (math.isfinite(eps0) and 0.0 <= eps0 < 1.0):
-        raise InputError(f"prestrain must lie in [0, 1), got {prestrain!r}")
-    epm = float(seam.get("elements_per_mm", 1.0) if elements_per_mm is None else elements_per_mm)
-    nl = int(seam.get("leg_elements", 4) if leg_elements is None else leg_elements)
+    check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
+    eps0 = check_number(seam.get("prestrain", 0.0) if prestrain is None else prestrain, "prestrain", ge=0.0, lt=1.0)
+    steps = check_int(steps, "steps", ge=1, le=10_000)
+    stitches = check_int(stitches, "stitches", ge=1, le=100)
+    if not isinstance(exact, (bool, np.bool_)):
+        raise InputError(f"exact must be True or False, got {exact!r}")
+    max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=20)
+    check_choice(geometry, "geometry", GEOMETRIES)
+    check_number(stabilize, "stabilize", ge=0.0, lt=1.0)
+    if contact is not None and not isinstance(contact, Contact):
+        raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
+    epm = check_number(seam.get("elements_per_mm", 1.0) if elements_per_mm is None else elements_per_mm,
+                       "elements_per_mm", gt=0.0, le=100.0)
+    nl = check_int(seam.get("leg_elements", 4) if leg_elements is None else leg_elements, "leg_elements",
+                   ge=1, le=1000)
     t0 = time.perf_counter()
     frame, info = seam_cell(cell, seam_distance=seam_distance, prestrain=eps0, stitches=stitches, exact=exact,
                             elements_per_mm=epm, leg_elements=nl)
@@ -270,10 +283,12 @@ def seam_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
     (mm), ``seam_height`` (mm), ``stitch_force`` (N), ``prestrain``; attrs ``method``, ``status``,
     ``effective_seam_distance_mm``.
     """
-    if method == "yarn":
-        return yarn_profile(cell, seam_distance=seam_distance, prestrain=prestrain, **options)
-    if method == "foundation":
-        return foundation_profile(cell, seam_distance=seam_distance, prestrain=prestrain, **options)
-    raise InputError(f"seam_profile: method must be 'yarn' or 'foundation', got {method!r}")
+    check_choice(method, "method", ("yarn", "foundation"))
+    fn = yarn_profile if method == "yarn" else foundation_profile
+    allowed = set(inspect.signature(fn).parameters) - {"cell", "seam_distance", "prestrain"}
+    unknown = sorted(set(options) - allowed)
+    if unknown:
+        raise InputError(f"seam_profile(method={method!r}): unknown option(s) {unknown}; allowed: {sorted(allowed)}")
+    return fn(cell, seam_distance=seam_distance, prestrain=prestrain, **options)
 
 
