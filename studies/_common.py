@@ -28,8 +28,11 @@ log = logging.getLogger("studies")
 def parser(file: str, doc: str | None, **kw) -> argparse.ArgumentParser:
     """An argparse parser with the shared options ``--quick`` and ``--out``."""
     name = Path(file).stem
-    p = argparse.ArgumentParser(prog=f"python {Path(file).resolve().relative_to(ROOT)}", description=doc,
-                                formatter_class=argparse.RawDescriptionHelpFormatter, **kw)
+    try:
+        prog = f"python {Path(file).resolve().relative_to(ROOT)}"
+    except ValueError:          # a copy of the script outside the checkout
+        prog = f"python {file}"
+    p = argparse.ArgumentParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter, **kw)
     p.add_argument("--quick", action="store_true",
                    help="a tiny version of the same computation (seconds; what tests/test_studies.py runs)")
     p.add_argument("--out", type=Path, default=Path("results") / name,

@@ -17,8 +17,8 @@ Usage::
 
 Default: about 6 min here (325 s; the co-rotational seam ramp has a 240 s budget). ``--quick``:
 the cell with 1 element per segment; unseamed to 1 % in 1 step (stabilisation 1e-6 only); the
-co-rotational seam ramp on d = 12 mm to eps0 = 0.02 in 1 step; layer factors 1 and 15 with a
-1-step ramp (seconds; the numbers are not the study's). Writes DIR/unseamed.nc, DIR/seam.nc,
+co-rotational seam ramp on d = 12 mm to eps0 = 0.02 in 1 step; layer factors 1 and 15 on
+d = 12 mm with a 1-step ramp (seconds; the numbers are not the study's). Writes DIR/unseamed.nc, DIR/seam.nc,
 DIR/layer_rigidity.nc and DIR/nonlinear_spacer.png (default DIR = results/nonlinear_spacer).
 """
 import sys
@@ -158,7 +158,7 @@ def main(argv=None):
         save_netcdf(se, out / "seam.nc")
         print("3. layer rigidity", flush=True)
         if a.quick:
-            lr = layer_rigidity(a.distance, a.prestrain, (1.0, 15.0), resolution=1, steps=1)
+            lr = layer_rigidity(12.0, a.prestrain, (1.0, 15.0), resolution=1, steps=1)
         else:
             lr = layer_rigidity(a.distance, a.prestrain, (1.0, 5.0, 15.0, 50.0))
         save_netcdf(lr, out / "layer_rigidity.nc")

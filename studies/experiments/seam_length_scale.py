@@ -129,7 +129,7 @@ def run(out: Path, *, distances=DISTANCES, resolution: int | None = None, steps:
     print(f"unseamed modulus {1e3 * Ec:.0f} kPa -> k = {k:.4f} N/mm^2 per stitch; layer rigidity from the yarns "
           f"{D_yarn:.2f} N mm^2 (lambda {lam_yarnsum:.2f} mm); fitted lambda {lam_fit:.2f} mm "
           f"(D = {D_fit:.2f} N mm^2)")
-    print(f"lowest crest any stitch gives at the fitted lambda: " +
+    print("lowest crest any stitch gives at the fitted lambda: " +
           ", ".join(f"d = {r[0]:g}: {b:.2f} mm" for r, b in zip(rows, bound_yarn)))
     print(f"the paper's 14.33 mm at d = 24 mm needs lambda >= {lam_min:.2f} mm, i.e. D >= {D_min:.1f} N mm^2 per "
           f"stitch: {D_min / D_fit:.0f}x the yarn-level cell's")
