@@ -32,10 +32,13 @@ def _id(p: Path) -> str:
 
 def _env() -> dict:
     """The environment of a script run: the repository first on the path, so that the scripts use
-    this checkout whether homtex is installed or not."""
+    this checkout whether homtex is installed or not; one thread (unless set)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [env.get("PYTHONPATH")])])
     env["MPLBACKEND"] = "Agg"
+    # one thread each: the quick runs are small, and the test machine may be shared
+    for key in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(key, "1")
     return env
 
 

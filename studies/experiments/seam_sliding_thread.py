@@ -18,8 +18,8 @@ Usage::
     python studies/experiments/seam_sliding_thread.py [--out DIR] [--distance 24] [--prestrain 0.3]
         [--iterations 30] [--quick]
 
-Default: a few minutes here. ``--quick``: d = 12 mm, 1 element per segment, a 1-step ramp and 2
-updates (seconds; not the study's numbers). Writes DIR/seam_sliding_thread.nc and
+Default: a few minutes here. ``--quick``: d = 12 mm, 1 element per segment, a 1-step ramp and 1
+update (seconds; not the study's numbers). Writes DIR/seam_sliding_thread.nc and
 DIR/seam_sliding_thread.png (default DIR = results/seam_sliding_thread).
 """
 import sys
@@ -42,10 +42,10 @@ def main(argv=None):
     p = parser(__file__, __doc__)
     p.add_argument("--distance", type=float, default=None, help="seam distance, mm (default 24; --quick 12)")
     p.add_argument("--prestrain", type=float, default=0.3)
-    p.add_argument("--iterations", type=int, default=None, help="sliding-thread updates (default 30; --quick 2)")
+    p.add_argument("--iterations", type=int, default=None, help="sliding-thread updates (default 30; --quick 1)")
     a = p.parse_args(argv)
     out = setup(a)
-    iterations = a.iterations or (2 if a.quick else 30)
+    iterations = a.iterations or (1 if a.quick else 30)
     distance = a.distance or (12.0 if a.quick else 24.0)
     ramp_steps = 1 if a.quick else 4
     t0 = time.perf_counter()
