@@ -21,19 +21,24 @@ needed contact), 2 cycling active set, 3 linear solver failure (CG stagnation, s
 
 Usage::
 
-    python studies/contact_stability.py [OUT] [--full]
+    python studies/verification/contact_stability.py [--out DIR] [--quick | --full]
 
-Writes ``OUT/contact_stability.nc`` and ``OUT/contact_stability.png``
-(default OUT = results/contact_stability).
+``--full``: more grids and seeds; ``--quick``: two penalties, one 3x3 grid, two removal
+fractions, 1 and 2 load steps to 10 % (reference 4), one slenderness (seconds). Writes
+``DIR/contact_stability.nc`` and ``DIR/contact_stability.png`` (default DIR =
+results/contact_stability).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 CLASSES = ("ok", "penetration", "cycling", "linear solver", "gaps not closing", "other")
 
@@ -97,7 +102,7 @@ def _attempt(fn):
     return out, 0, "ok", time.perf_counter() - t0
 
 
-def run(out: Path, full: bool = False):
+def run(out: Path, full: bool = False, quick: bool = False):
     import xarray as xr
 
     import homtex
@@ -108,7 +113,7 @@ def run(out: Path, full: bool = False):
     data, coords = {}, {}
 
     # ---- penalty sweep
-    factors = 10.0 ** np.arange(-6, 9)
+    factors = 10.0 ** (np.array([-6, 0]) if quick else np.arange(-6, 9))
     combos = [("penalty", "direct"), ("penalty", "amg"), ("augmented", "direct"), ("augmented", "amg")]
     fr, fixed, loads, F_hand = crossing()
     from homtex.contact.solver import ContactSolver
@@ -136,9 +141,12 @@ def run(out: Path, full: bool = False):
     print("penalty sweep done", flush=True)
 
     # ---- removal fraction sweep
-    fractions = np.array([0.05, 0.1, 0.25, 0.5, 0.75, 1.0])
-    grids = ((5, 12), (8, 18), (12, 26)) if full else ((5, 12), (8, 18))
-    seeds = range(6 if full else 4)
+    fractions = np.array([0.25, 1.0] if quick else [0.05, 0.1, 0.25, 0.5, 0.75, 1.0])
+    if quick:
+        grids, seeds = ((3, 8),), range(1)
+    else:
+        grids = ((5, 12), (8, 18), (12, 26)) if full else ((5, 12), (8, 18))
+        seeds = range(6 if full else 4)
     rcode = np.zeros((len(grids), len(seeds), len(fractions)), dtype=np.int64)
     rits = np.full(rcode.shape, np.nan)
     rerr = np.full(rcode.shape, np.nan)
@@ -166,37 +174,38 @@ def run(out: Path, full: bool = False):
 
     # ---- load step sweep (compress)
     cell = periodic_cell()
-    steps = np.array([1, 2, 5, 10, 20, 40])
+    steps = np.array([1, 2] if quick else [1, 2, 5, 10, 20, 40])
+    ref_steps, final = (4, 0.1) if quick else (80, 0.3)
     strats = ("pdas", "removal")
-    ref_ds = homtex.compress(cell, strain=0.3, steps=80)
+    ref_ds = homtex.compress(cell, strain=final, steps=ref_steps)
     F_ref = float(ref_ds.force[-1]) if ref_ds.attrs["status"] == "ok" else np.nan
     scode = np.zeros((len(steps), len(strats)), dtype=np.int64)
     serr = np.full(scode.shape, np.nan)
     sdone = np.zeros(scode.shape)
     for i, ns in enumerate(steps):
         for j, st in enumerate(strats):
-            ds = homtex.compress(cell, strain=0.3, steps=int(ns), contact=Contact(strategy=st))
+            ds = homtex.compress(cell, strain=final, steps=int(ns), contact=Contact(strategy=st))
             status = ds.attrs["status"]
             sdone[i, j] = ds.sizes["strain"] / ns
             if status == "ok":
                 serr[i, j] = abs(float(ds.force[-1]) - F_ref) / F_ref
             else:
-                scode[i, j] = classify(status)
-    coords["steps"] = ("steps", steps, {"units": "1", "long_name": "load steps to 30 % compression"})
+                scode[i, j] = classify(ds.attrs.get("status_detail", "") or str(status))
+    coords["steps"] = ("steps", steps, {"units": "1", "long_name": f"load steps to {100 * final:g} % compression"})
     coords["strategy"] = ("strategy", np.array(strats), {"units": "1", "long_name": "active-set strategy"})
     data["step_failure"] = (("steps", "strategy"), scode, {"units": "1", "long_name": "failure class of compress"})
-    data["step_error"] = (("steps", "strategy"), serr, {"units": "1", "long_name": "relative error of the final force vs 80 steps"})
+    data["step_error"] = (("steps", "strategy"), serr, {"units": "1", "long_name": f"relative error of the final force vs {ref_steps} steps"})
     data["step_completed"] = (("steps", "strategy"), sdone, {"units": "1", "long_name": "share of steps completed"})
     print("load step sweep done", flush=True)
 
     # ---- slenderness sweep
-    slender = 10.0 ** np.arange(1, 5.01, 0.5)
+    slender = 10.0 ** (np.array([3.0]) if quick else np.arange(1, 5.01, 0.5))
     sl_strats = ("pdas", "removal", "pdas/jacobi-cg")
     lcode = np.zeros((len(slender), len(sl_strats)), dtype=np.int64)
     lerr = np.full(lcode.shape, np.nan)
     lcg = np.full(lcode.shape, np.nan)
     for i, sl in enumerate(slender):
-        fr_s, fx, ld, F_s = crossing(slender=sl, n_el=64)
+        fr_s, fx, ld, F_s = crossing(slender=sl, n_el=16 if quick else 64)
         for j, st in enumerate(sl_strats):
             solver = "cg" if st.endswith("jacobi-cg") else "amg"
             res, c, msg, _ = _attempt(lambda: homtex.solve_static(fr_s, fx, ld, solver=solver, tol=1e-10, maxiter=3000,
@@ -214,20 +223,16 @@ def run(out: Path, full: bool = False):
 
     ds = xr.Dataset(data, coords=coords, attrs={
         "failure_classes": "; ".join(f"{i} {c}" for i, c in enumerate(CLASSES)),
-        "default_penalty_N_per_mm": k0})
-    path = out / "contact_stability.nc"
-    ds.to_netcdf(path)
+        "default_penalty_N_per_mm": k0, "reference_steps": ref_steps, "final_strain": final, "quick": int(quick)})
+    path = save_netcdf(ds, out / "contact_stability.nc")
     chart(ds, path.with_suffix(".png"))
     return path
 
 
 def chart(ds, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     import warnings
+
+    plt = pyplot()
 
     warnings.simplefilter("ignore", RuntimeWarning)
     marks = {1: ("v", "penetration"), 2: ("o", "cycling"), 3: ("s", "linear solver"), 4: ("D", "gaps not closing"),
@@ -267,8 +272,8 @@ def chart(ds, path):
     for j, s in enumerate(ds["strategy"].values):
         line, = a.loglog(st, ds["step_error"].values[:, j], "o-", label=f"{s}")
         fails(a, st, ds["step_failure"].values[:, j], 1e-12, line.get_color())
-    a.set_xlabel("load steps to 30 % compression")
-    a.set_ylabel("final force error vs 80 steps")
+    a.set_xlabel(f"load steps to {100 * ds.attrs['final_strain']:g} % compression")
+    a.set_ylabel(f"final force error vs {ds.attrs['reference_steps']} steps")
     a.set_title("load step size (compress, 2-periodic cell)")
     a.legend(fontsize=7)
 
@@ -282,16 +287,15 @@ def chart(ds, path):
     a.set_title("slenderness")
     a.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("out", nargs="?", default="results/contact_stability")
+    p = parser(__file__, __doc__)
     p.add_argument("--full", action="store_true", help="more grids and seeds")
     a = p.parse_args(argv)
-    path = run(Path(a.out), full=a.full)
+    out = setup(a)
+    path = run(out, full=a.full, quick=a.quick)
     print(f"wrote {path} and {path.with_suffix('.png')}")
 
 

@@ -1,25 +1,26 @@
 """Lookup speed and accuracy: 10^5 queries of grid (tensor-product) and RBF (sample) lookups.
 
-    python studies/bench_rom.py [OUT_DIR] [--queries N] [--full]
+    python studies/benchmarks/bench_rom.py [--out DIR] [--queries N] [--quick | --full]
 
 Fits lookups of a known function f(x, y) = sin(3x) cos(2y) + x y on grids of n^2 nodes and on
 n Latin-hypercube samples, evaluates N queries (default 10^5, the issue's size) and records the
 evaluation time (best of 3, after a warm-up call that compiles numba kernels), the true RMS
 error at the queries and the reported hold-out error. Writes bench_rom.nc and bench_rom.png
-into OUT_DIR (default results/bench_rom/). ``--full`` adds larger sizes.
+into DIR (default results/bench_rom/). ``--full`` adds larger sizes; ``--quick``: 10^3 queries and
+the two smallest training sets (seconds).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from homtex.output.io import write_netcdf
-from homtex.lookup import Lookup
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 
 def f(x, y):
@@ -37,19 +38,21 @@ def timed(fn, q, repeat=3):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", nargs="?", default="results/bench_rom")
-    ap.add_argument("--queries", type=int, default=100_000)
+    from scipy.stats import qmc
+
+    from homtex.lookup import Lookup
+
+    ap = parser(__file__, __doc__)
+    ap.add_argument("--queries", type=int, default=None, help="queries (default 10^5; --quick 10^3)")
     ap.add_argument("--full", action="store_true", help="larger training sets")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    from scipy.stats import qmc
+    out = setup(args)
+    args.queries = args.queries or (1_000 if args.quick else 100_000)
 
     rng = np.random.default_rng(0)
     q = rng.uniform([0, 0], [1, 2], (args.queries, 2))
     exact = f(q[:, 0], q[:, 1])
-    sizes = [16, 64, 256, 1024] + ([4096] if args.full else [])
+    sizes = [16, 64] if args.quick else [16, 64, 256, 1024] + ([4096] if args.full else [])
     rows = []
     for kind in ("grid-linear", "grid-cubic", "rbf"):
         for n in sizes:
@@ -91,12 +94,8 @@ def main(argv=None):
         coords={"method": ("method", np.array(kinds, dtype=object), {"units": "1", "long_name": "lookup method"}),
                 "level": ("level", np.arange(nmax), {"units": "1", "long_name": "training-set size level"})},
         attrs={"queries": args.queries, "function": "sin(3x) cos(2y) + x y on [0,1]x[0,2]"})
-    write_netcdf(ds, out / "bench_rom.nc")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    save_netcdf(ds, out / "bench_rom.nc")
+    plt = pyplot()
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     for i, k in enumerate(kinds):
         n = ds.training_points[i]
@@ -109,7 +108,7 @@ def main(argv=None):
     ax[0].legend(fontsize=7)
     ax[1].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / "bench_rom.png", dpi=120)
+    save_figure(fig, out / "bench_rom.png")
     print(f"wrote {out / 'bench_rom.nc'} and {out / 'bench_rom.png'}")
     return ds
 

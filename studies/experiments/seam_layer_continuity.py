@@ -16,26 +16,29 @@ multifilament bending and torsion factor (1; 3.3, a solid PET rod of the yarn's 
 and records crest, seam line, mean height (the global compression) and stitch force. A point
 that fails keeps its status; the others are kept.
 
-    python studies/seam_layer_continuity.py [OUT_DIR]   (default results/seam_layer_continuity; ~8 min)
+    python studies/experiments/seam_layer_continuity.py [--out DIR] [--quick]
 
-Writes result.nc and seam_layer_continuity.png.
+Default: about 8 min here. ``--quick``: d = 12 mm, 1 element per segment, 1 ramp step, two points
+(1-needle inlay x1 at eps0 0.3; 3-needle inlay x10 at eps0 0.02), seconds; not the study's numbers.
+Writes DIR/seam_layer_continuity.nc and DIR/seam_layer_continuity.png (default DIR =
+results/seam_layer_continuity).
 """
 
 from __future__ import annotations
 
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-import homtex
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
 D = 24.0
 POINTS = [(span, f, 0.5) for span in (1, 3) for f in (1.0, 3.3, 10.0, 100.0)] + [(3, 10.0, 0.7), (3, 100.0, 0.7)]
+QUICK_POINTS = [(1, 1.0, 0.3), (3, 10.0, 0.02)]
 
 
 def variant(cell, span: int, factor: float):
@@ -44,16 +47,21 @@ def variant(cell, span: int, factor: float):
                            "yarns.multifilament.bending_factor": factor, "yarns.multifilament.torsion_factor": factor})
 
 
-def main(out: Path) -> xr.Dataset:
-    out.mkdir(parents=True, exist_ok=True)
-    warnings.simplefilter("ignore")
-    base = homtex.load_cell(HERE.parent / "cells" / "spacer_20mm.toml")
+def run(out: Path, *, points=POINTS, d: float = D, resolution: int | None = None, steps: int = 8) -> xr.Dataset:
+    import homtex
+
+    base = homtex.load_cell("spacer_20mm")
+    if resolution is not None:
+        base = base.replace(**{"resolution.elements_per_segment": resolution})
+    eps_main = points[0][2]
     rows, profiles = [], []
-    for span, f, eps in POINTS:
+    for span, f, eps in points:
         t0 = time.perf_counter()
         try:
-            p = homtex.seam_profile(variant(base, span, f), seam_distance=D, prestrain=eps, steps=8)
-            status = p.attrs["status"]
+            p = homtex.seam_profile(variant(base, span, f), seam_distance=d, prestrain=eps, steps=steps)
+            status = str(p.attrs["status"])
+            if status != "ok":
+                status = f"{status}: {p.attrs.get('status_detail', '')}"
         except homtex.InputError as err:          # a bad variant: record it, keep the others
             p, status = None, f"failed: {err}"
         ok = status == "ok"
@@ -80,14 +88,13 @@ def main(out: Path) -> xr.Dataset:
          "status": ("point", [r["status"] for r in rows]),
          "seconds": ("point", [r["seconds"] for r in rows], {"units": "s"})},
         coords={"point": np.arange(len(rows))})
-    ds.attrs.update(seam_distance_mm=D, cell="cells/spacer_20mm.toml", paper_cushion_24mm=14.33,
-                    title="seam cell d = 24 mm: inlay span and multifilament bending", homtex_version=homtex.__version__)
-    ds.to_netcdf(out / "result.nc")
+    ds.attrs.update(seam_distance_mm=d, cell="cells/spacer_20mm.toml", paper_cushion_24mm=14.33,
+                    title=f"seam cell d = {d:g} mm: inlay span and multifilament bending",
+                    homtex_version=homtex.__version__, ramp_steps=steps,
+                    elements_per_segment=int(base.resolution.get("elements_per_segment", 2)))
+    save_netcdf(ds, out / "seam_layer_continuity.nc")
 
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.5))
     for r, pr, c in zip(rows, profiles, [f"C{i}" for i in range(len(rows))]):
         if pr is not None:
@@ -95,21 +102,31 @@ def main(out: Path) -> xr.Dataset:
                        label=f"inlay {r['span']} needle(s), rigidity x{r['factor']:g}, eps0 {r['eps']}")
     ax[0].axhline(14.33, color="k", ls=":", lw=0.8)
     ax[0].set(xlabel="x across the seam, mm (0 = seam line)", ylabel="height, mm",
-              title=f"yarn-level seam cell, d = {D:g} mm (dotted: the paper's 14.33 mm)")
+              title=f"yarn-level seam cell, d = {d:g} mm (dotted: the paper's 14.33 mm at 24 mm)")
     ax[0].legend(fontsize=6)
     for span, mk in ((1, "o"), (3, "s")):
-        sel = [r for r in rows if r["span"] == span and r["eps"] == 0.5 and r["status"] == "ok"]
+        sel = [r for r in rows if r["span"] == span and r["eps"] == eps_main and r["status"] == "ok"]
         ax[1].plot([r["factor"] for r in sel], [r["crest"] for r in sel], mk + "-", label=f"crest, inlay over {span}")
         ax[1].plot([r["factor"] for r in sel], [r["mean"] for r in sel], mk + "--", label=f"mean, inlay over {span}")
     ax[1].axhline(14.33, color="k", ls=":", lw=0.8)
     ax[1].set(xscale="log", xlabel="multifilament bending and torsion factor", ylabel="height, mm", ylim=(10, 21),
-              title="eps0 = 0.5: cushion crest and mean height")
+              title=f"eps0 = {eps_main:g}: cushion crest and mean height")
     ax[1].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / "seam_layer_continuity.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "seam_layer_continuity.png", dpi=110)
     return ds
 
 
+def main(argv=None):
+    ap = parser(__file__, __doc__)
+    a = ap.parse_args(argv)
+    out = setup(a)
+    if a.quick:
+        run(out, points=QUICK_POINTS, d=12.0, resolution=1, steps=1)
+    else:
+        run(out)
+    print(f"wrote {out / 'seam_layer_continuity.nc'} and {out / 'seam_layer_continuity.png'}")
+
+
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("results/seam_layer_continuity"))
+    main()

@@ -14,22 +14,27 @@ hierarchy setups, setup and solve seconds, CG iterations.
 
 Usage::
 
-    python studies/contact_strategies.py [OUT] [--full]
+    python studies/verification/contact_strategies.py [--out DIR] [--quick | --full]
 
-Writes ``OUT/contact_strategies.nc`` and ``OUT/contact_strategies.png``
-(default OUT = results/contact_strategies). Default sizes run in about a minute here.
+Default sizes run in about a minute here; ``--full`` adds 16x16 and 24x24 grids; ``--quick``:
+the 3x3 grid, one seed (seconds). Writes ``DIR/contact_strategies.nc`` and
+``DIR/contact_strategies.png`` (default DIR = results/contact_strategies).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+
 DEFAULT = ((3, 8), (5, 12), (8, 18), (12, 26))
 FULL = DEFAULT + ((16, 34), (24, 50))
+QUICK = ((3, 8),)
 SEEDS = (0, 1, 2)
 STRATS = (("pdas", 0.25), ("removal", 0.25), ("removal", 0.5))
 
@@ -111,19 +116,15 @@ def run(out: Path, sizes, seeds=SEEDS):
                 "strategy": ("strategy", np.array(names), {"units": "1", "long_name": "active-set strategy"}),
                 "reuse": ("reuse", np.array([0, 1]), {"units": "1", "long_name": "AMG hierarchy reused across contact iterations"})},
         attrs={"problem_family": "homtex.contact.examples.beam_grid", "enforcement": "augmented"})
-    path = out / "contact_strategies.nc"
-    ds.to_netcdf(path)
+    path = save_netcdf(ds, out / "contact_strategies.nc")
     chart(ds, path.with_suffix(".png"))
     return path
 
 
 def chart(ds, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     import warnings
+
+    plt = pyplot()
 
     warnings.simplefilter("ignore", RuntimeWarning)
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -150,16 +151,18 @@ def chart(ds, path):
     ax[1].set_title("pdas + AMG-CG: reusing the hierarchy")
     ax[1].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("out", nargs="?", default="results/contact_strategies")
-    p.add_argument("--full", action="store_true", help="larger grids (up to 16 x 16 beams)")
+    p = parser(__file__, __doc__)
+    p.add_argument("--full", action="store_true", help="larger grids (up to 24 x 24 beams)")
     a = p.parse_args(argv)
-    path = run(Path(a.out), FULL if a.full else DEFAULT)
+    out = setup(a)
+    if a.quick:
+        path = run(out, QUICK, seeds=(0,))
+    else:
+        path = run(out, FULL if a.full else DEFAULT)
     print(f"wrote {path} and {path.with_suffix('.png')}")
 
 

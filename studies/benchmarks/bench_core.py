@@ -21,15 +21,16 @@ is limited to 1 thread inside the solvers (homtex.solvers does that).
 
 Usage::
 
-    python studies/bench_core.py [OUT] [--full] [--opensees] [--threads N]
+    python studies/benchmarks/bench_core.py [--out DIR] [--quick | --full] [--opensees] [--threads N]
 
-Writes ``OUT/bench_core.nc`` (dims: size, method) and ``OUT/bench_core.png``
-(default OUT = results/bench_core).
+Default sizes 8.7e3 .. 4.1e5 DOF (about 45 s here); ``--full`` up to 2.1e6 DOF (4-5 min);
+``--quick``: 2 and 3 cells per edge, a small stall case and no JIT subprocesses (seconds).
+Writes ``DIR/bench_core.nc`` (dims: size, method) and ``DIR/bench_core.png``
+(default DIR = results/bench_core).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -41,8 +42,12 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+
 DEFAULT_REPEATS = (3, 5, 8, 10)  # 8.7e3 .. 4.1e5 DOF, about 45 s here
 FULL_REPEATS = (3, 5, 8, 10, 12, 14, 17)  # up to 2.1e6 DOF, about 4-5 min here
+QUICK_REPEATS = (2, 3)
 NEL = 4
 RADIUS = 0.02  # mm; strut length a / sqrt(2) = 0.707 mm -> L / r = 35
 E_MOD, NU = 1000.0, 0.3  # MPa
@@ -199,7 +204,7 @@ def stall_case(direct_name: str, r: int = 6, nel: int = 8, maxiter: int = 3000) 
     from homtex.fem.assembly import Assembler
     from homtex.geometry.lattices import lattice_frame
     from homtex.linalg.nullspace import rigid_body_modes
-from homtex.linalg.solvers import LinearSolver, constrain
+    from homtex.linalg.solvers import LinearSolver, constrain
 
     f = lattice_frame("bcc", radius=0.01, E=E_MOD, nu=NU, elements_per_strut=nel, repeat=(r, r, r),
                       periodic=False)
@@ -229,13 +234,14 @@ from homtex.linalg.solvers import LinearSolver, constrain
 
 
 def run(out: Path, repeats, *, threads: int, direct_limit: float, jacobi_maxiter: int,
-        jacobi_max_dof: int, reference_max_elements: int, opensees_repeat: int | None) -> Path:
+        jacobi_max_dof: int, reference_max_elements: int, opensees_repeat: int | None,
+        jit: bool = True, stall: tuple = (6, 8)) -> Path:
     import xarray as xr
 
     from homtex.fem.assembly import Assembler, assemble_reference
     from homtex.errors import SolverError
     from homtex.linalg.nullspace import rigid_body_modes
-from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
+    from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
 
     direct_name = "direct_cholmod" if _cholmod is not None else "direct_superlu"
     methods = ["amg", "cg_jacobi", direct_name, "opensees"]
@@ -245,9 +251,13 @@ from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
     ndof, nelem, asm_s, asm_rate, ref_s, ref_err = (np.full(ns, np.nan) for _ in range(6))
     os_err = np.full(ns, np.nan)
     direct_prev = None  # (ndof, seconds) of the last direct run
-    print(f"JIT timings (subprocesses, NUMBA_NUM_THREADS={threads}) ...", flush=True)
-    jit = jit_times(threads)
-    print(json.dumps(jit, indent=1), flush=True)
+    if jit:
+        print(f"JIT timings (subprocesses, NUMBA_NUM_THREADS={threads}) ...", flush=True)
+        jit = jit_times(threads)
+        print(json.dumps(jit, indent=1), flush=True)
+    else:
+        jit = {}
+        print("JIT timings skipped", flush=True)
     for s, r in enumerate(repeats):
         frame, mask, b = build_problem(r)
         ndof[s], nelem[s] = frame.ndof, frame.n_elements
@@ -311,7 +321,7 @@ from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
                       f"max |u| = {os_err[s]:.1e}", flush=True)
             except Exception as err:  # optional comparison
                 print(f"   opensees: skipped ({type(err).__name__}: {err})")
-    stall = stall_case(direct_name)
+    stall = stall_case(direct_name, r=stall[0], nel=stall[1])
     dims = ("size", "method")
     ds = xr.Dataset(
         {
@@ -339,6 +349,7 @@ from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
                 "method": ("method", methods, {"units": "1", "long_name": "solver"})},
         attrs={"lattice": f"octet block, {NEL} elements per strut, strut L/r = 35, clamped at z=0",
                "tolerance": 1e-8, "numba_threads": threads, "blas_threads_in_solver": 1,
+               "jit_timings": "measured" if jit else "skipped",
                "machine": machine(),
                **{f"jit_{k}_{q}_seconds": v for k, d in jit.items() for q, v in d.items()}},
     )
@@ -349,9 +360,7 @@ from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
                               {"units": unit, "long_name": f"{long}, bending-dominated BCC block "
                                                           f"(L/r = 87, 8 elements per strut)"})
     ds.attrs["stall_ndof"] = STALL_NDOF[0]
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "bench_core.nc"
-    ds.to_netcdf(path)
+    path = save_netcdf(ds, out / "bench_core.nc")
     plot(ds, out / "bench_core.png")
     return path
 
@@ -371,11 +380,7 @@ def machine() -> str:
 
 
 def plot(ds, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
     n = ds.ndof.values
     for meth in ds.method.values:
@@ -402,13 +407,11 @@ def plot(ds, path: Path) -> None:
     a2.set_ylabel("CG iterations")
     a2.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("out", nargs="?", default="results/bench_core")
+    p = parser(__file__, __doc__)
     p.add_argument("--full", action="store_true", help="sizes up to ~2e6 DOF")
     p.add_argument("--threads", type=int, default=os.cpu_count())
     p.add_argument("--opensees", action="store_true", help="compare OpenSeesPy at ~5e4 DOF")
@@ -416,15 +419,18 @@ def main(argv=None) -> None:
     p.add_argument("--direct-limit", type=float, default=None,
                    help="skip the direct solver when predicted slower than this, s")
     a = p.parse_args(argv)
+    out = setup(a)
     os.environ["NUMBA_NUM_THREADS"] = str(a.threads)
     import numba
 
-    numba.set_num_threads(a.threads)
-    repeats = tuple(a.repeats) if a.repeats else (FULL_REPEATS if a.full else DEFAULT_REPEATS)
+    numba.set_num_threads(min(a.threads, numba.config.NUMBA_NUM_THREADS))
+    sizes = QUICK_REPEATS if a.quick else (FULL_REPEATS if a.full else DEFAULT_REPEATS)
+    repeats = tuple(a.repeats) if a.repeats else sizes
     limit = a.direct_limit or (300.0 if a.full else 40.0)
-    path = run(Path(a.out), repeats, threads=a.threads, direct_limit=limit,
+    path = run(out, repeats, threads=a.threads, direct_limit=limit,
                jacobi_maxiter=3000, jacobi_max_dof=250_000, reference_max_elements=12_000,
-               opensees_repeat=5 if a.opensees else None)
+               opensees_repeat=(repeats[-1] if a.quick else 5) if a.opensees else None,
+               jit=not a.quick, stall=(2, 2) if a.quick else (6, 8))
     print(f"wrote {path} and {path.with_suffix('.png')}")
 
 

@@ -15,18 +15,22 @@ is the least-squares slope of log(error) against log(n) over the last three poin
 
 Usage::
 
-    python studies/convergence_homogenize.py [OUT] [--nmax N] [--ref NREF]
+    python studies/verification/convergence_homogenize.py [--out DIR] [--quick] [--nmax N] [--ref NREF]
 
-Writes ``OUT/convergence_homogenize.nc`` (dims: lattice, struts, n) and
-``OUT/convergence_homogenize.png`` (default OUT = results/convergence_homogenize).
+Default n up to 32, reference 256 (about 6 s here); ``--quick``: n up to 2, reference 8.
+Writes ``DIR/convergence_homogenize.nc`` (dims: lattice, struts, n) and
+``DIR/convergence_homogenize.png`` (default DIR = results/convergence_homogenize).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 RADIUS = 0.03
 E_MOD, NU = 1000.0, 0.3
@@ -91,19 +95,13 @@ def run(out: Path, nmax: int, nref: int) -> Path:
         attrs={"radius_mm": RADIUS, "E_MPa": E_MOD, "nu": NU, "waviness": WAVINESS, "n_ref": nref,
                "solver": "direct", "cell": "one periodic cell, edge 1 mm"},
     )
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "convergence_homogenize.nc"
-    ds.to_netcdf(path)
+    path = save_netcdf(ds, out / "convergence_homogenize.nc")
     plot(ds, out / "convergence_homogenize.png")
     return path
 
 
 def plot(ds, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     n = ds.n.values.astype(float)
     floor = 1e-16
@@ -122,17 +120,18 @@ def plot(ds, path: Path) -> None:
                  f"straight: vs n = 1", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("out", nargs="?", default="results/convergence_homogenize")
-    p.add_argument("--nmax", type=int, default=32, help="largest elements per strut (power of 2)")
-    p.add_argument("--ref", type=int, default=256, help="elements per strut of the wavy reference")
+    p = parser(__file__, __doc__)
+    p.add_argument("--nmax", type=int, default=None, help="largest elements per strut (power of 2; default 32, --quick 2)")
+    p.add_argument("--ref", type=int, default=None, help="elements per strut of the wavy reference (default 256, --quick 8)")
     a = p.parse_args(argv)
-    path = run(Path(a.out), a.nmax, a.ref)
+    out = setup(a)
+    nmax = a.nmax or (2 if a.quick else 32)
+    nref = a.ref or (8 if a.quick else 256)
+    path = run(out, nmax, nref)
     print(f"wrote {path} and {path.with_suffix('.png')}")
 
 

@@ -9,56 +9,64 @@ rest length L_rest = (1 - eps0) L0, and each stitch element's pre-strain is set 
 that its axial force is T per strand; repeated to a fixed point. It records the cushion and
 seam-line heights before (beam stitch) and after (sliding thread).
 
-Usage: python studies/seam_sliding_thread.py [OUTDIR] [--distance 24] [--prestrain 0.3]
+The new pre-strains go into the frame's per-element ``prestrain``; the contact solver reads them
+when its pre-strain scale is set (``ss.cs.set_prestrain_scale(1.0)``, which :meth:`SeamSolver.solve`
+does), so the load and the element forces follow.
+
+Usage::
+
+    python studies/experiments/seam_sliding_thread.py [--out DIR] [--distance 24] [--prestrain 0.3]
+        [--iterations 30] [--quick]
+
+Default: a few minutes here. ``--quick``: d = 12 mm, 1 element per segment, a 1-step ramp and 1
+update (seconds; not the study's numbers). Writes DIR/seam_sliding_thread.nc and
+DIR/seam_sliding_thread.png (default DIR = results/seam_sliding_thread).
 """
-import argparse
+import sys
 import time
-import warnings
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import xarray as xr
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
-
-import homtex  # noqa: E402
-from homtex.errors import SolverError  # noqa: E402
-from homtex.geometry.seam import seam_cell  # noqa: E402
-from homtex.output.io import write_netcdf  # noqa: E402
-from homtex.seams import SeamSolver, measure_profile  # noqa: E402
-from homtex.analysis.static import prestrain_load  # noqa: E402
-
-warnings.simplefilter("ignore")   # creation overlaps are reported by the cell
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("out", nargs="?", default="results/seam_sliding_thread")
-    p.add_argument("--distance", type=float, default=24.0)
+    import homtex
+    from homtex.errors import SolverError
+    from homtex.geometry.seam import seam_cell
+    from homtex.seams import SeamSolver, measure_profile
+
+    p = parser(__file__, __doc__)
+    p.add_argument("--distance", type=float, default=None, help="seam distance, mm (default 24; --quick 12)")
     p.add_argument("--prestrain", type=float, default=0.3)
-    p.add_argument("--iterations", type=int, default=30)
+    p.add_argument("--iterations", type=int, default=None, help="sliding-thread updates (default 30; --quick 1)")
     a = p.parse_args(argv)
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = setup(a)
+    iterations = a.iterations or (1 if a.quick else 30)
+    distance = a.distance or (12.0 if a.quick else 24.0)
+    ramp_steps = 1 if a.quick else 4
     t0 = time.perf_counter()
     cell = homtex.load_cell("spacer_20mm")
-    fr, info = seam_cell(cell, seam_distance=a.distance, prestrain=a.prestrain)
+    if a.quick:
+        cell = cell.replace(**{"resolution.elements_per_segment": 1})
+    fr, info = seam_cell(cell, seam_distance=distance, prestrain=a.prestrain)
     st = np.arange(int(info["fabric_elements"]), fr.n_elements)
     strands = np.where(np.asarray(info["legs"])[st], 2.0, 1.0)
     EA = float(info["stitch_EA"])
     l0 = fr.length[st]
     L_rest = (1.0 - a.prestrain) * float((strands * l0).sum())
     ss = SeamSolver(fr, info)
-    ss.ramp(4)
+    ss.ramp(ramp_steps)
     _, h = measure_profile(fr, info, ss.result.u)
     N = ss.result.axial_force[st] / strands
     rec = {"tension_min": [float(N.min())], "tension_max": [float(N.max())],
            "cushion_height": [float(np.nanmax(h))], "seam_height": [float(h[len(h) // 2])]}
     status = "ok"
-    pre = fr.prestrain
-    for it in range(a.iterations):
+    pre = fr.prestrain          # the frame's per-element pre-strain, updated in place below
+    for it in range(iterations):
         u = ss.result.u
         du = u[fr.elements[st, 1], :3] - u[fr.elements[st, 0], :3]
         delta = np.einsum("ij,ij->i", fr.R[st, 0], du)
@@ -66,13 +74,13 @@ def main(argv=None):
         target = T / EA - delta / l0
         change = float(np.abs(target - pre[st]).max())
         pre[st] = pre[st] + 0.5 * (target - pre[st])    # damped: the contact state follows
-        ss.f_pre = prestrain_load(fr)
+        ss.cs.set_prestrain_scale(1.0)                  # the load of the new pre-strains
         try:
-            res = ss._solve(1.0)
+            res = ss.solve(1.0)
         except SolverError as err:
             status = f"stopped at iteration {it + 1}: {err}"
             break
-        ss._accept(res, 1.0)
+        ss.accept(res, 1.0)
         _, h = measure_profile(fr, info, res.u)
         N = res.axial_force[st] / strands
         rec["tension_min"].append(float(N.min()))
@@ -89,8 +97,10 @@ def main(argv=None):
                     coords={"iteration": ("iteration", np.arange(len(rec["cushion_height"])),
                                           {"units": "1", "long_name": "0: beam stitch; then sliding-thread updates"})},
                     attrs={"status": status, "seam_distance_mm": float(info["seam_distance"]),
-                           "prestrain": a.prestrain, "seconds": time.perf_counter() - t0})
-    write_netcdf(ds, out / "seam_sliding_thread.nc")
+                           "prestrain": a.prestrain, "seconds": time.perf_counter() - t0, "ramp_steps": ramp_steps,
+                           "elements_per_segment": int(cell.resolution.get("elements_per_segment", 2))})
+    save_netcdf(ds, out / "seam_sliding_thread.nc")
+    plt = pyplot()
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
     ax[0].plot(ds.iteration, ds.cushion_height, "o-", label="cushion")
     ax[0].plot(ds.iteration, ds.seam_height, "s-", label="seam line")
@@ -101,8 +111,7 @@ def main(argv=None):
     ax[1].set(xlabel="iteration", ylabel="tension per strand, N", title="stitch tension")
     ax[1].legend()
     fig.tight_layout()
-    fig.savefig(out / "seam_sliding_thread.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "seam_sliding_thread.png", dpi=110)
     print(ds.to_dataframe())
     print(f"status: {status}; wrote {out}/seam_sliding_thread.nc and .png")
     return ds

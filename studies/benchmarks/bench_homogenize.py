@@ -14,22 +14,25 @@ The issue's target is ``homogenize / one_solve <= 2.5`` at 1e6 DOF.
 
 Usage::
 
-    python studies/bench_homogenize.py [OUT] [--full] [--repeats R ...] [--tol TOL]
-        [--nullspace rigid|translations] [--runs N]
+    python studies/benchmarks/bench_homogenize.py [--out DIR] [--quick | --full] [--repeats R ...]
+        [--tol TOL] [--nullspace rigid|translations] [--runs N]
 
-Default: r = 4, 6 (~3e4, ~1e5 DOF); ``--full`` adds r = 13 (~1e6 DOF).
-Writes ``OUT/bench_homogenize.nc`` (dim: size) and ``OUT/bench_homogenize.png``
-(default OUT = results/bench_homogenize).
+Default: r = 4, 6 (~3e4, ~1e5 DOF); ``--full`` adds r = 13 (~1e6 DOF); ``--quick``: r = 2, one
+run, warm-up on r = 1 (seconds). Writes ``DIR/bench_homogenize.nc`` (dim: size) and
+``DIR/bench_homogenize.png`` (default DIR = results/bench_homogenize).
 """
 
 from __future__ import annotations
 
-import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 NEL = 4
 RADIUS = 0.02
@@ -97,11 +100,11 @@ def best_of(r: int, tol: float, nullspace: str, runs: int, waviness: float) -> d
 
 
 def run(out: Path, repeats, tol: float, nullspace: str = "rigid", runs: int = 2,
-        waviness: float = 0.1) -> Path:
+        waviness: float = 0.1, warmup: int = 2) -> Path:
     import xarray as xr
 
     rows = []
-    measure(2, tol, nullspace, waviness)  # warm-up: numba cache loads, pyamg/scipy first calls
+    measure(warmup, tol, nullspace, waviness)  # warm-up: numba cache loads, pyamg/scipy first calls
     for r in repeats:
         m = best_of(r, tol, nullspace, runs, waviness)
         rows.append(m)
@@ -142,19 +145,13 @@ def run(out: Path, repeats, tol: float, nullspace: str = "rigid", runs: int = 2,
                "nullspace": nullspace, "timing": f"minimum over {runs} runs",
                "solver": "amg", "numba_threads": int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count()))},
     )
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "bench_homogenize.nc"
-    ds.to_netcdf(path)
+    path = save_netcdf(ds, out / "bench_homogenize.nc")
     plot(ds, out / "bench_homogenize.png")
     return path
 
 
 def plot(ds, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     n = ds.ndof.values
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
     a1.loglog(n, ds.one_solve_seconds, "o-", label="one solve, shear case 23 (assembly + setup + solve)")
@@ -181,24 +178,25 @@ def plot(ds, path: Path) -> None:
         a2.text(x[i], bottom[i], f"{rat:.2f}x", ha="center", va="bottom")
     a2.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("out", nargs="?", default="results/bench_homogenize")
+    p = parser(__file__, __doc__)
     p.add_argument("--full", action="store_true", help="add the ~1e6 DOF supercell (r = 13)")
     p.add_argument("--repeats", type=int, nargs="+", help="cells per edge (overrides sizes)")
     p.add_argument("--tol", type=float, default=1e-10, help="CG relative residual (homogenize default)")
     p.add_argument("--nullspace", choices=("rigid", "translations"), default="rigid",
                    help="AMG near-null space passed to homogenize (its default: rigid)")
-    p.add_argument("--runs", type=int, default=2, help="timing runs per size (minimum kept)")
+    p.add_argument("--runs", type=int, default=None, help="timing runs per size (minimum kept; default 2, --quick 1)")
     p.add_argument("--waviness", type=float, default=0.1,
                    help="strut bow / length (0: straight octet, whose fluctuations are nearly trivial)")
     a = p.parse_args(argv)
-    repeats = tuple(a.repeats) if a.repeats else ((4, 6, 13) if a.full else (4, 6))
-    path = run(Path(a.out), repeats, a.tol, a.nullspace, a.runs, a.waviness)
+    out = setup(a)
+    sizes = (2,) if a.quick else ((4, 6, 13) if a.full else (4, 6))
+    repeats = tuple(a.repeats) if a.repeats else sizes
+    runs = a.runs or (1 if a.quick else 2)
+    path = run(out, repeats, a.tol, a.nullspace, runs, a.waviness, warmup=1 if a.quick else 2)
     print(f"wrote {path} and {path.with_suffix('.png')}")
 
 

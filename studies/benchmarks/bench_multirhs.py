@@ -18,20 +18,24 @@ path with one column (``one_solve_block``), to show what the block kernels give 
 
 Usage::
 
-    python studies/bench_multirhs.py [OUT] [--full] [--repeats R ...] [--runs N] [--no-sequential]
+    python studies/benchmarks/bench_multirhs.py [--out DIR] [--quick | --full] [--repeats R ...] [--runs N]
+        [--no-sequential]
 
-Default: r = 6 (~1e5 DOF); ``--full``: r = 13 (~1e6 DOF). Numba threads: NUMBA_NUM_THREADS
-(recorded). Writes ``OUT/bench_multirhs.nc`` (dim: size) and ``OUT/bench_multirhs.png``
-(default OUT = results/bench_multirhs).
+Default: r = 6 (~1e5 DOF); ``--full``: r = 13 (~1e6 DOF); ``--quick``: r = 2, warm-up on r = 1
+(seconds). Numba threads: NUMBA_NUM_THREADS (recorded). Writes ``DIR/bench_multirhs.nc`` (dim:
+size) and ``DIR/bench_multirhs.png`` (default DIR = results/bench_multirhs).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 NEL = 4
 RADIUS = 0.02
@@ -84,11 +88,11 @@ TIMING_KEYS = ("one_solve", "one_setup", "one_cg", "one_block_cg", "batched", "b
 
 
 def run(out: Path, repeats, tol: float = 1e-10, runs: int = 1, sequential: bool = True,
-        waviness: float = 0.1) -> Path:
+        waviness: float = 0.1, warmup: int = 2) -> Path:
     import numba
     import xarray as xr
 
-    measure(2, tol, True, waviness)  # warm-up: numba cache loads, first calls
+    measure(warmup, tol, True, waviness)  # warm-up: numba cache loads, first calls
     rows = []
     for r in repeats:
         ms = [measure(r, tol, sequential, waviness) for _ in range(runs)]
@@ -137,19 +141,13 @@ def run(out: Path, repeats, tol: float = 1e-10, runs: int = 1, sequential: bool 
                "block_solve_threads": 1, "nullspace": "rigid",
                "one_solve_block_note": "one_block_cg_seconds: case 23 alone through solve_many"},
     )
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "bench_multirhs.nc"
-    ds.to_netcdf(path)
+    path = save_netcdf(ds, out / "bench_multirhs.nc")
     plot(ds, out / "bench_multirhs.png")
     return path
 
 
 def plot(ds, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     n = ds.ndof.values
     x = np.arange(len(n))
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
@@ -173,13 +171,11 @@ def plot(ds, path: Path) -> None:
                                          + ds.batched_seconds.values.tolist())))
     ax.legend(fontsize=8, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("out", nargs="?", default="results/bench_multirhs")
+    p = parser(__file__, __doc__)
     p.add_argument("--full", action="store_true", help="the ~1e6 DOF supercell (r = 13)")
     p.add_argument("--repeats", type=int, nargs="+", help="cells per edge (overrides sizes)")
     p.add_argument("--tol", type=float, default=1e-10, help="PCG relative residual")
@@ -187,9 +183,11 @@ def main(argv=None) -> None:
     p.add_argument("--no-sequential", action="store_true", help="skip homogenize(batched=False)")
     p.add_argument("--waviness", type=float, default=0.1, help="strut bow / length")
     a = p.parse_args(argv)
-    repeats = tuple(a.repeats) if a.repeats else ((13,) if a.full else (6,))
-    path = run(Path(a.out), repeats, a.tol, a.runs, not a.no_sequential, a.waviness)
-    print(f"wrote {path}")
+    out = setup(a)
+    sizes = (2,) if a.quick else ((13,) if a.full else (6,))
+    repeats = tuple(a.repeats) if a.repeats else sizes
+    path = run(out, repeats, a.tol, a.runs, not a.no_sequential, a.waviness, warmup=1 if a.quick else 2)
+    print(f"wrote {path} and {path.with_suffix('.png')}")
 
 
 if __name__ == "__main__":

@@ -17,9 +17,11 @@ If lambda of the yarn-level cell is below that minimum, no stitch pre-strain (an
 model, pre-strain or tension controlled) can give the paper's cushions: the calibration is
 impossible with this layer/pile pair, whatever eps0.
 
-    python studies/seam_length_scale.py [OUT_DIR]    (default results/seam_length_scale; ~40 s)
+    python studies/experiments/seam_length_scale.py [--out DIR] [--quick]
 
-Writes result.nc (fits and bounds) and seam_length_scale.png.
+Default: about 40 s here. ``--quick``: d = 18 and 24 mm on the cell with 1 element per segment and
+a 1-step ramp (seconds; not the study's numbers). Writes DIR/seam_length_scale.nc (fits and
+bounds) and DIR/seam_length_scale.png (default DIR = results/seam_length_scale).
 """
 
 from __future__ import annotations
@@ -32,16 +34,18 @@ import numpy as np
 import xarray as xr
 from scipy.optimize import brentq, least_squares
 
-import homtex
-from homtex.seams.foundation import _green, fabric_modulus, layer_rigidity
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
+DISTANCES = (18.0, 24.0, 43.0)
 TARGET = {18.0: 10.23, 24.0: 14.33, 43.0: 20.3}   # the paper's simulated cushion heights, mm
 MEASURED = {18.0: "8-12", 24.0: "15", 43.0: "20"}
 
 
 def shape(x, d, lam):
     """Periodic beam-on-foundation deflection shape, 1 at the seam line (x = 0)."""
+    from homtex.seams.foundation import _green
+
     g = _green(np.asarray(x, float), d, 1.0 / lam, 1.0)
     return g / _green(np.array([0.0]), d, 1.0 / lam, 1.0)[0]
 
@@ -63,10 +67,14 @@ def crest_bound(lam, d, H):
     return H * (1.0 - shape(np.array([0.5 * d]), d, lam)[0])
 
 
-def main(out: Path) -> xr.Dataset:
-    out.mkdir(parents=True, exist_ok=True)
+def run(out: Path, *, distances=DISTANCES, resolution: int | None = None, steps: int = 4) -> xr.Dataset:
+    import homtex
+    from homtex.seams.foundation import fabric_modulus, layer_rigidity
+
     t0 = time.perf_counter()
-    cell = homtex.load_cell(HERE.parent / "cells" / "spacer_20mm.toml")
+    cell = homtex.load_cell("spacer_20mm")
+    if resolution is not None:
+        cell = cell.replace(**{"resolution.elements_per_segment": resolution})
     H = float(cell.info["thickness"])
     s = float(cell.parameters["seam"]["stitch_length"])
     Ec = fabric_modulus(cell)                  # MPa, unseamed yarn-level cell
@@ -74,8 +82,8 @@ def main(out: Path) -> xr.Dataset:
     D_yarn = layer_rigidity(cell, s)           # N mm^2 per stitch length, sum over the layer's yarns
     lam_yarnsum = (4 * D_yarn / k) ** 0.25
     ds_list, rows = [], []
-    for d in (18.0, 24.0, 43.0):
-        p = homtex.seam_profile(cell, seam_distance=d)
+    for d in distances:
+        p = homtex.seam_profile(cell, seam_distance=d, steps=steps)
         x, h = p.x.values, p.height.values
         de = float(p.seam_distance)
         lam, amp, crest, rms = fit_lambda(x, h, de)
@@ -86,8 +94,8 @@ def main(out: Path) -> xr.Dataset:
               f"{float(p.seam_height):.2f} mm; fitted lambda {lam:.2f} mm (rms {rms:.2f} mm)", flush=True)
     lam_fit = float(np.mean([r[2] for r in rows]))
     lam_grid = np.geomspace(1.0, 40.0, 161)
-    bound = np.array([[crest_bound(lam, d, H) for lam in lam_grid] for d in (18.0, 24.0, 43.0)])
-    d24 = rows[1][1]
+    bound = np.array([[crest_bound(lam, d, H) for lam in lam_grid] for d in distances])
+    d24 = next(r[1] for r in rows if r[0] == 24.0)
     lam_min = brentq(lambda lam: crest_bound(lam, d24, H) - TARGET[24.0], 0.5, 200.0)
     D_min = k * lam_min ** 4 / 4.0
     D_fit = k * lam_fit ** 4 / 4.0
@@ -103,7 +111,7 @@ def main(out: Path) -> xr.Dataset:
          "crest_bound_yarn": ("seam_distance", bound_yarn,
                               {"units": "mm", "long_name": "lowest crest any stitch gives at the fitted lambda "
                                "(seam line closed)"}),
-         "cushion_paper": ("seam_distance", [TARGET[r[0]] for r in rows],
+         "cushion_paper": ("seam_distance", [TARGET.get(r[0], np.nan) for r in rows],
                            {"units": "mm", "long_name": "the paper's simulated cushion height"}),
          "crest_bound": (("seam_distance", "lam"), bound,
                          {"units": "mm", "long_name": "lowest crest any stitch gives (seam line closed)"})},
@@ -115,20 +123,18 @@ def main(out: Path) -> xr.Dataset:
                      lambda_min_for_paper_24mm_mm=lam_min, layer_rigidity_min_for_paper_24mm_Nmm2=D_min,
                      rigidity_factor_needed=D_min / D_fit, seconds=time.perf_counter() - t0,
                      title="length scale of the seam dip: yarn-level cell against the paper's cushions",
-                     homtex_version=homtex.__version__)
-    res.to_netcdf(out / "result.nc")
+                     homtex_version=homtex.__version__, ramp_steps=steps,
+                     elements_per_segment=int(cell.resolution.get("elements_per_segment", 2)))
+    save_netcdf(res, out / "seam_length_scale.nc")
     print(f"unseamed modulus {1e3 * Ec:.0f} kPa -> k = {k:.4f} N/mm^2 per stitch; layer rigidity from the yarns "
           f"{D_yarn:.2f} N mm^2 (lambda {lam_yarnsum:.2f} mm); fitted lambda {lam_fit:.2f} mm "
           f"(D = {D_fit:.2f} N mm^2)")
-    print(f"lowest crest any stitch gives at the fitted lambda: " +
+    print("lowest crest any stitch gives at the fitted lambda: " +
           ", ".join(f"d = {r[0]:g}: {b:.2f} mm" for r, b in zip(rows, bound_yarn)))
     print(f"the paper's 14.33 mm at d = 24 mm needs lambda >= {lam_min:.2f} mm, i.e. D >= {D_min:.1f} N mm^2 per "
           f"stitch: {D_min / D_fit:.0f}x the yarn-level cell's")
 
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.5))
     for (d, x, h, xf, hf), c in zip(ds_list, ("tab:red", "tab:blue", "tab:green")):
         ax[0].plot(x, h, "o", ms=3, color=c, label=f"yarn level, d = {d:g} mm")
@@ -138,9 +144,10 @@ def main(out: Path) -> xr.Dataset:
     ax[0].set(xlabel="x across the seam, mm (0 = seam line)", ylabel="height, mm", ylim=(8, 21.5),
               title=f"yarn-level profiles and beam-on-foundation fits (lambda {lam_fit:.1f} mm)")
     ax[0].legend(fontsize=7)
-    for row, d, c in zip(bound, (18.0, 24.0, 43.0), ("tab:red", "tab:blue", "tab:green")):
+    for row, d, c in zip(bound, distances, ("tab:red", "tab:blue", "tab:green")):
         ax[1].plot(lam_grid, row, color=c, label=f"d = {d:g} mm: crest with the seam line closed")
-        ax[1].axhline(TARGET[d], color=c, ls=":", lw=0.8)
+        if d in TARGET:
+            ax[1].axhline(TARGET[d], color=c, ls=":", lw=0.8)
     ax[1].axvline(lam_fit, color="0.3", lw=0.8)
     ax[1].text(lam_fit, 12, f" yarn level\n {lam_fit:.1f} mm", fontsize=7)
     ax[1].axvline(lam_min, color="tab:blue", lw=0.8, ls="--")
@@ -150,10 +157,20 @@ def main(out: Path) -> xr.Dataset:
               ylim=(0, 21), title="lowest cushion any stitch can give (dotted: the paper's cushions)")
     ax[1].legend(fontsize=7, loc="lower left")
     fig.tight_layout()
-    fig.savefig(out / "seam_length_scale.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "seam_length_scale.png", dpi=110)
     return res
 
 
+def main(argv=None):
+    ap = parser(__file__, __doc__)
+    a = ap.parse_args(argv)
+    out = setup(a)
+    if a.quick:
+        run(out, distances=(18.0, 24.0), resolution=1, steps=1)
+    else:
+        run(out)
+    print(f"wrote {out / 'seam_length_scale.nc'} and {out / 'seam_length_scale.png'}")
+
+
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("results/seam_length_scale"))
+    main()

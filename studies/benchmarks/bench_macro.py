@@ -1,40 +1,41 @@
 """Macro cushion layer: run time of one curve over resolution, and the curves for d = none, 43, 24, 18 mm.
 
-    python studies/bench_macro.py [OUT_DIR] [--curve FILE.nc] [--full]
+    python studies/benchmarks/bench_macro.py [--out DIR] [--curve FILE.nc] [--quick | --full]
 
 The unseamed law is a compression curve from FILE.nc (``stress`` kPa over ``strain``, e.g. the
 output of ``homtex compress``) or, by default, a stiffening stand-in sigma = 20 eps + 400 eps^3 kPa
 (marked in the attributes). Cushion profiles come from ``homtex.seam_profile`` on
-cells/spacer_20mm.toml (computed once, outside the timing). Times are the best of 5 calls of
-``macro_curve`` with the profile and curve injected, i.e. the macro layer alone. Writes
-bench_macro.nc and bench_macro.png into OUT_DIR (default results/bench_macro/).
+cells/spacer_20mm.toml (yarn level; computed once, outside the timing). Times are the best of 5
+calls of ``macro_curve`` with the profile and curve injected, i.e. the macro layer alone.
+``--full`` adds finer column/step resolutions; ``--quick``: d = none and 24 mm with the analytical
+(foundation) profile, the coarsest resolution, best of 1 (seconds). Writes bench_macro.nc and
+bench_macro.png into DIR (default results/bench_macro/).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-import homtex
-from homtex.output.io import read_netcdf, write_netcdf
-from homtex.macro import macro_curve
-
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", nargs="?", default="results/bench_macro")
+    import homtex
+    from homtex.macro import macro_curve
+    from homtex.output.io import read_netcdf
+
+    ap = parser(__file__, __doc__)
     ap.add_argument("--curve", default=None, help="netCDF compression curve of the unseamed cell")
     ap.add_argument("--scatter", type=float, default=1.0, help="cushion height scatter, mm")
     ap.add_argument("--full", action="store_true", help="finer column/step resolutions in the timing")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = setup(args)
     if args.curve:
         curve = read_netcdf(args.curve)
         source = f"compression curve {args.curve}"
@@ -43,10 +44,16 @@ def main(argv=None):
         curve = xr.Dataset({"stress": ("strain", 20 * e + 400 * e ** 3)}, coords={"strain": e},
                            attrs={"thickness_mm": 20.0})
         source = "stand-in law sigma = 20 eps + 400 eps^3 kPa (not the yarn-level curve)"
-    cell = homtex.load_cell(ROOT / "cells" / "spacer_20mm.toml", build=False)
-    distances = [None, 43.0, 24.0, 18.0]
-    profiles = {d: (None if d is None else homtex.seam_profile(cell, seam_distance=d)) for d in distances}
-    res = [(110, 51), (440, 201), (1760, 401)] + ([(7040, 801), (28160, 1601)] if args.full else [])
+    cell = homtex.load_cell("spacer_20mm", build=False)
+    distances = [None, 24.0] if args.quick else [None, 43.0, 24.0, 18.0]
+    method = "foundation" if args.quick else "yarn"
+    profiles = {d: (None if d is None else homtex.seam_profile(cell, seam_distance=d, method=method))
+                for d in distances}
+    if args.quick:
+        res = [(110, 51)]
+    else:
+        res = [(110, 51), (440, 201), (1760, 401)] + ([(7040, 801), (28160, 1601)] if args.full else [])
+    repeat = 1 if args.quick else 5
     times = np.empty((len(distances), len(res)))
     for i, d in enumerate(distances):
         for j, (nc, ns) in enumerate(res):
@@ -54,7 +61,7 @@ def main(argv=None):
                       height_scatter=args.scatter if d else 0.0, seed=1, strain=0.5)
             macro_curve(**kw)
             best = np.inf
-            for _ in range(5):
+            for _ in range(repeat):
                 t = time.perf_counter()
                 macro_curve(**kw)
                 best = min(best, time.perf_counter() - t)
@@ -65,7 +72,7 @@ def main(argv=None):
     labels = np.array(["none" if d is None else f"{d:g}" for d in distances], dtype=object)
     ds = xr.Dataset(
         {"seconds": (("seam_distance", "resolution"), times,
-                     {"units": "s", "long_name": "run time of one macro_curve call (best of 5)"}),
+                     {"units": "s", "long_name": f"run time of one macro_curve call (best of {repeat})"}),
          "n_columns": ("resolution", [r[0] for r in res], {"units": "1", "long_name": "cushion columns"}),
          "steps": ("resolution", [r[1] for r in res], {"units": "1", "long_name": "plate positions"}),
          "force": (("seam_distance", "plate_displacement"), np.array([c.force.values for c in curves]),
@@ -76,13 +83,9 @@ def main(argv=None):
                 "resolution": ("resolution", np.arange(len(res)), {"units": "1", "long_name": "resolution level"}),
                 "plate_displacement": ("plate_displacement", curves[0].plate_displacement.values,
                                        {"units": "mm", "long_name": "punch displacement from 20 mm"})},
-        attrs={"law": source, "height_scatter_mm": args.scatter, "seed": 1})
-    write_netcdf(ds, out / "bench_macro.nc")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+        attrs={"law": source, "height_scatter_mm": args.scatter, "seed": 1, "profile_method": method})
+    save_netcdf(ds, out / "bench_macro.nc")
+    plt = pyplot()
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     for i, lab in enumerate(labels):
         ax[0].plot(ds.plate_displacement / 20.0 * 100, ds.force[i], label=f"d = {lab} mm")
@@ -93,7 +96,7 @@ def main(argv=None):
     ax[1].legend(fontsize=8)
     fig.text(0.01, 0.01, source, fontsize=7)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(out / "bench_macro.png", dpi=120)
+    save_figure(fig, out / "bench_macro.png")
     print(f"wrote {out / 'bench_macro.nc'} and {out / 'bench_macro.png'}")
     return ds
 

@@ -11,30 +11,30 @@ Three experiments, one Dataset each (netCDF) and one chart:
 3. ``layer_rigidity``: the linear seam cell with the surface layers' Young's modulus (so their
    bending rigidity) scaled by 1, 5, 15, 50: how far the seam dip spreads into the cushion.
 
-Usage: python studies/nonlinear_spacer.py [OUTDIR] [--strain 0.3] [--steps 60] [--quick]
+Usage::
+
+    python studies/experiments/nonlinear_spacer.py [--out DIR] [--strain 0.3] [--steps 60] [--quick] [--plot-only]
+
+Default: about 6 min here (325 s; the co-rotational seam ramp has a 240 s budget). ``--quick``:
+the cell with 1 element per segment; unseamed to 1 % in 1 step (stabilisation 1e-6 only); the
+co-rotational seam ramp on d = 12 mm to eps0 = 0.02 in 1 step; layer factors 1 and 15 on
+d = 12 mm with a 1-step ramp (seconds; the numbers are not the study's). Writes DIR/unseamed.nc, DIR/seam.nc,
+DIR/layer_rigidity.nc and DIR/nonlinear_spacer.png (default DIR = results/nonlinear_spacer).
 """
-import argparse
+import sys
 import time
-import warnings
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import xarray as xr
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
-
-import homtex  # noqa: E402
-from homtex.errors import SolverError  # noqa: E402
-from homtex.geometry.seam import seam_cell  # noqa: E402
-from homtex.output.io import write_netcdf  # noqa: E402
-from homtex.seams import SeamSolver, measure_profile  # noqa: E402
-
-warnings.simplefilter("ignore")   # creation overlaps are reported by the cell
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 
 def unseamed(cell, strain, steps, factors):
+    import homtex
+
     curves, rows = [], []
     for geometry, c in [("linear", 0.0)] + [("nonlinear", f) for f in factors]:
         t = time.perf_counter()
@@ -43,8 +43,8 @@ def unseamed(cell, strain, steps, factors):
         label = "linear" if geometry == "linear" else f"co-rotational, stabilise {c:g}"
         ratio = (ds.stabilization_force / np.maximum(ds.force, 1e-300)).values
         curves.append(ds[["stress", "newton_iterations"]].assign(stab_ratio=("strain", ratio)).expand_dims(model=[label]))
-        rows.append((label, sec, ds.attrs["status"], int(ds.attrs["steps_done"])))
-        print(f"  {label:36s} {sec:6.1f} s  steps {ds.attrs['steps_done']:3d}  {ds.attrs['status'][:90]}", flush=True)
+        rows.append((label, sec, status_text(ds), int(ds.attrs["steps_done"])))
+        print(f"  {label:36s} {sec:6.1f} s  steps {ds.attrs['steps_done']:3d}  {status_text(ds)[:90]}", flush=True)
     out = xr.concat(curves, dim="model", join="outer")
     out["stress"].attrs.update(units="kPa", long_name="nominal compressive stress")
     out["newton_iterations"].attrs.update(units="1", long_name="Newton iterations of the step (0: linear)")
@@ -55,7 +55,18 @@ def unseamed(cell, strain, steps, factors):
     return out
 
 
-def seam(cell, d, eps0, ramp_steps, stabilize, seconds):
+def status_text(ds) -> str:
+    """'ok', or 'failed: <why>' (curves and profiles carry attrs status and status_detail)."""
+    st = str(ds.attrs.get("status", "ok"))
+    return st if st == "ok" else f"{st}: {ds.attrs.get('status_detail', '')}"
+
+
+def seam(cell, d, eps0, ramp_steps, stabilize, seconds, lin_steps=4):
+    import homtex
+    from homtex.errors import SolverError
+    from homtex.geometry.seam import seam_cell
+    from homtex.seams import SeamSolver, measure_profile
+
     fr, info = seam_cell(cell, seam_distance=d, prestrain=eps0)
     ss = SeamSolver(fr, info, geometry="nonlinear", stabilize=stabilize)
     t = time.perf_counter()
@@ -72,7 +83,7 @@ def seam(cell, d, eps0, ramp_steps, stabilize, seconds):
     reached = alpha * eps0
     print(f"  co-rotational ramp reached eps0 = {reached:.4f} ({alpha:.3f} of {eps0}) in {sec:.1f} s: {status[:120]}",
           flush=True)
-    lin = homtex.seam_profile(cell, seam_distance=d, prestrain=reached, steps=4)
+    lin = homtex.seam_profile(cell, seam_distance=d, prestrain=reached, steps=lin_steps)
     ds = xr.Dataset(
         {"height": (("model", "x"), np.vstack([h_nl, lin.height.values]),
                     {"units": "mm", "long_name": "fabric height per wale bin"}),
@@ -85,10 +96,14 @@ def seam(cell, d, eps0, ramp_steps, stabilize, seconds):
     return ds
 
 
-def layer_rigidity(d, eps0, factors):
+def layer_rigidity(d, eps0, factors, resolution=None, steps=4):
+    import homtex
+
     rows = []
     for f in factors:
         cell = homtex.load_cell("spacer_20mm")
+        if resolution is not None:
+            cell = cell.replace(**{"resolution.elements_per_segment": resolution})
         E = cell.frame.E.copy()
         layer = np.zeros(len(E), dtype=bool)
         for g, m in cell.groups.items():
@@ -96,12 +111,12 @@ def layer_rigidity(d, eps0, factors):
                 layer |= np.asarray(m, dtype=bool)
         E[layer] *= f
         cell._frame = cell.frame.with_(E=E)       # a what-if: same geometry, stiffer layer yarns
-        ds = homtex.seam_profile(cell, seam_distance=d, prestrain=eps0, steps=4)
+        ds = homtex.seam_profile(cell, seam_distance=d, prestrain=eps0, steps=steps)
         rows.append(ds.height.values)
         x = ds.x.values
         print(f"  layer E x{f:<4g}: seam {float(ds.seam_height):.2f} mm, mid-cushion "
               f"{float(ds.height.values[np.argmax(np.abs(x))]):.2f} mm, max {float(ds.cushion_height):.2f} mm "
-              f"({ds.attrs['status'][:40]})", flush=True)
+              f"({status_text(ds)[:40]})", flush=True)
     out = xr.Dataset({"height": (("layer_factor", "x"), np.vstack(rows), {"units": "mm", "long_name": "fabric height"})},
                      coords={"layer_factor": ("layer_factor", np.asarray(factors, float),
                                               {"units": "1", "long_name": "factor on the surface layers' Young's modulus"}),
@@ -112,35 +127,43 @@ def layer_rigidity(d, eps0, factors):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("out", nargs="?", default="results/nonlinear_spacer")
-    p.add_argument("--strain", type=float, default=0.3)
-    p.add_argument("--steps", type=int, default=60)
+    import homtex
+
+    p = parser(__file__, __doc__)
+    p.add_argument("--strain", type=float, default=None, help="unseamed compression (default 0.3; --quick 0.01)")
+    p.add_argument("--steps", type=int, default=None, help="unseamed load steps (default 60; --quick 1)")
     p.add_argument("--distance", type=float, default=24.0)
     p.add_argument("--prestrain", type=float, default=0.3)
-    p.add_argument("--quick", action="store_true", help="short unseamed runs (strain 0.05, 10 steps)")
     p.add_argument("--seam-seconds", type=float, default=240.0, help="time budget of the co-rotational seam ramp")
-    p.add_argument("--plot-only", action="store_true", help="redraw the chart from OUTDIR's netCDF files")
+    p.add_argument("--plot-only", action="store_true", help="redraw the chart from DIR's netCDF files")
     a = p.parse_args(argv)
-    if a.quick:
-        a.strain, a.steps = 0.05, 10
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = setup(a)
+    strain = a.strain or (0.01 if a.quick else 0.3)
+    steps = a.steps or (1 if a.quick else 60)
     t0 = time.perf_counter()
     if a.plot_only:
         un, se, lr = (xr.load_dataset(out / f) for f in ("unseamed.nc", "seam.nc", "layer_rigidity.nc"))
     else:
         cell = homtex.load_cell("spacer_20mm")
+        if a.quick:
+            cell = cell.replace(**{"resolution.elements_per_segment": 1})
         print("1. unseamed compression", flush=True)
-        un = unseamed(cell, a.strain, a.steps, (1e-6, 1e-7))
-        write_netcdf(un, out / "unseamed.nc")
+        un = unseamed(cell, strain, steps, (1e-6,) if a.quick else (1e-6, 1e-7))
+        save_netcdf(un, out / "unseamed.nc")
         print("2. seam cell with co-rotational beams", flush=True)
-        se = seam(cell, a.distance, a.prestrain, 40, 1e-7, a.seam_seconds)
-        write_netcdf(se, out / "seam.nc")
+        if a.quick:
+            se = seam(cell, 12.0, 0.02, 1, 1e-7, 60.0, lin_steps=1)
+        else:
+            se = seam(cell, a.distance, a.prestrain, 40, 1e-7, a.seam_seconds)
+        save_netcdf(se, out / "seam.nc")
         print("3. layer rigidity", flush=True)
-        lr = layer_rigidity(a.distance, a.prestrain, (1.0, 5.0, 15.0, 50.0))
-        write_netcdf(lr, out / "layer_rigidity.nc")
+        if a.quick:
+            lr = layer_rigidity(12.0, a.prestrain, (1.0, 15.0), resolution=1, steps=1)
+        else:
+            lr = layer_rigidity(a.distance, a.prestrain, (1.0, 5.0, 15.0, 50.0))
+        save_netcdf(lr, out / "layer_rigidity.nc")
 
+    plt = pyplot()
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
     for m in un.model.values:
         s = un.stress.sel(model=m)
@@ -159,7 +182,7 @@ def main(argv=None):
               title=f"linear seam cell, eps0 = {lr.attrs['prestrain']}: layer stiffness")
     ax[2].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / "nonlinear_spacer.png", dpi=120)
+    save_figure(fig, out / "nonlinear_spacer.png")
     print(f"wrote {out}/unseamed.nc, seam.nc, layer_rigidity.nc, nonlinear_spacer.png in {time.perf_counter() - t0:.0f} s")
 
 

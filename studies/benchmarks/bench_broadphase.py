@@ -8,24 +8,28 @@ compiled beforehand), candidate pairs found, and a check that both find the same
 
 Usage::
 
-    python studies/bench_broadphase.py [OUT] [--full] [--threads N] [--repeats R]
+    python studies/benchmarks/bench_broadphase.py [--out DIR] [--quick | --full] [--threads N] [--repeats R]
 
-Default sizes 1e3..2e5 segments (< 1 min here); ``--full`` goes to 1e6 (target: <= 1 s).
-Writes ``OUT/bench_broadphase.nc`` (dims: size, method) and ``OUT/bench_broadphase.png``
-(default OUT = results/bench_broadphase).
+Default sizes 1e3..2e5 segments (< 1 min here); ``--full`` goes to 1e6 (target: <= 1 s);
+``--quick``: 1e3 and 3e3 segments, one repeat (seconds). Writes ``DIR/bench_broadphase.nc``
+(dims: size, method) and ``DIR/bench_broadphase.png`` (default DIR = results/bench_broadphase).
 """
 
 from __future__ import annotations
 
-import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+
 DEFAULT_SIZES = (1_000, 3_000, 10_000, 30_000, 100_000, 200_000)
 FULL_SIZES = DEFAULT_SIZES + (500_000, 1_000_000)
+QUICK_SIZES = (1_000, 3_000)
 LENGTH, RADIUS, MARGIN = 0.5, 0.05, 0.02
 
 
@@ -91,18 +95,13 @@ def run(out: Path, sizes, repeats: int = 3, threads: int | None = None, kdtree_m
         attrs={"segment_length_mm": LENGTH, "contact_radius_mm": RADIUS, "margin_mm": MARGIN,
                "density_per_mm3": 1.0, "periodic": "x and y", "threads": int(threads or 0),
                "target": "1e6 segments in <= 1 s"})
-    path = out / "bench_broadphase.nc"
-    ds.to_netcdf(path)
+    path = save_netcdf(ds, out / "bench_broadphase.nc")
     chart(ds, path.with_suffix(".png"))
     return path
 
 
 def chart(ds, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     n = ds["size"].values
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for j, m in enumerate(ds["method"].values):
@@ -116,21 +115,22 @@ def chart(ds, path):
     ax.set_title("broad phase: uniform grid (numba) vs cKDTree, 2-periodic box")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("out", nargs="?", default="results/bench_broadphase")
+    p = parser(__file__, __doc__)
     p.add_argument("--full", action="store_true", help="sizes up to 1e6 segments")
     p.add_argument("--threads", type=int, default=os.cpu_count())
-    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--repeats", type=int, default=None, help="timing repeats (default 3; --quick: 1)")
     a = p.parse_args(argv)
+    out = setup(a)
     import numba
 
-    numba.set_num_threads(a.threads)
-    path = run(Path(a.out), FULL_SIZES if a.full else DEFAULT_SIZES, repeats=a.repeats, threads=a.threads)
+    numba.set_num_threads(min(a.threads, numba.config.NUMBA_NUM_THREADS))
+    sizes = QUICK_SIZES if a.quick else (FULL_SIZES if a.full else DEFAULT_SIZES)
+    repeats = a.repeats or (1 if a.quick else 3)
+    path = run(out, sizes, repeats=repeats, threads=a.threads)
     print(f"wrote {path} and {path.with_suffix('.png')}")
 
 
