@@ -29,7 +29,7 @@ The removal strategy solves each active set as equalities:
 With ``solver="amg"`` the AMG hierarchy is reused as the preconditioner of later contact
 iterations while the operator changes little (pdas: at most ``reuse_tol`` of the active rows
 changed and the same penalty); it is rebuilt when CG needs more than twice the iterations of a
-fresh hierarchy. studies/contact_strategies.py measures what this saves.
+fresh hierarchy. studies/verification/contact_strategies.py measures what this saves.
 """
 
 from __future__ import annotations
