@@ -238,8 +238,8 @@ def run(out: Path, repeats, *, threads: int, direct_limit: float, jacobi_maxiter
         jit: bool = True, stall: tuple = (6, 8)) -> Path:
     import xarray as xr
 
-    from homtex.fem.assembly import Assembler, assemble_reference
     from homtex.errors import SolverError
+    from homtex.fem.assembly import Assembler, assemble_reference
     from homtex.linalg.nullspace import rigid_body_modes
     from homtex.linalg.solvers import LinearSolver, _cholmod, constrain
 

@@ -42,8 +42,8 @@ E_MOD, NU = 1000.0, 0.3
 def measure(r: int, tol: float, nullspace: str = "rigid", waviness: float = 0.1) -> dict:
     """Timings (s) of one solve and of homogenize on the r^3 periodic octet supercell."""
     import homtex
-    from homtex.geometry.lattices import lattice_frame
     from homtex.analysis.periodic import _Operator, unit_strains
+    from homtex.geometry.lattices import lattice_frame
 
     frame = lattice_frame("octet", radius=RADIUS, E=E_MOD, nu=NU, elements_per_strut=NEL,
                           repeat=(r, r, r), periodic=True, waviness=waviness)

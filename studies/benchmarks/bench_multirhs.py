@@ -46,9 +46,9 @@ CASES = ("11", "22", "33", "23", "13", "12")
 def measure(r: int, tol: float, sequential: bool = True, waviness: float = 0.1) -> dict:
     """Timings (s), iterations and C of the r^3 supercell: one solve, sequential, batched."""
     import homtex
+    from homtex.analysis.periodic import _Operator, unit_strains
     from homtex.geometry.lattices import lattice_frame
     from homtex.linalg.multirhs import solve_many
-    from homtex.analysis.periodic import _Operator, unit_strains
 
     frame = lattice_frame("octet", radius=RADIUS, E=E_MOD, nu=NU, elements_per_strut=NEL,
                           repeat=(r, r, r), periodic=True, waviness=waviness)
