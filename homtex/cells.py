@@ -17,6 +17,7 @@ Schema::
     contact_radius = 0.1           # optional, mm
     bending_factor = 1.0           # optional: bending rigidity / the solid section's (default 1)
     torsion_factor = 1.0           # optional: torsional rigidity / the solid section's (default 1)
+    strain_limit = 0.02            # optional: elastic limit of axial/shear strain (large-rotation solves warn beyond)
     source = "where the numbers come from"
     [resolution]
     elements_per_strut = 4         # generator-specific keys
@@ -39,7 +40,7 @@ import numpy as np
 
 from .errors import CellError, InputError
 from .model.frame import Frame
-from .model.sections import YarnType
+from .model.sections import DEFAULT_STRAIN_LIMIT, YarnType
 from .validate import check_keys, get_list, get_number, get_str, get_table, type_name
 
 try:
@@ -64,7 +65,7 @@ GENERATORS: dict[str, str] = {
 TABLES = ("cell", "parameters", "yarns", "resolution")
 CELL_KEYS = ("name", "generator", "description")
 YARN_KEYS = ("section", "radius", "semi_axes", "E", "nu", "contact_radius", "source", "bending_factor",
-             "torsion_factor")
+             "torsion_factor", "strain_limit")
 
 
 def _yarn(name: str, d: dict) -> YarnType:
@@ -92,8 +93,10 @@ def _yarn(name: str, d: dict) -> YarnType:
     source = get_str(d, "source", table)
     bf = get_number(d, "bending_factor", table, gt=0, default=1.0)
     tf = get_number(d, "torsion_factor", table, gt=0, default=1.0)
+    sl = get_number(d, "strain_limit", table, gt=0, le=1.0, default=DEFAULT_STRAIN_LIMIT)
     return YarnType(name=name, radius=float(radius), E=E, nu=nu, contact_radius=rc,
-                    semi_axes=semi, source=source, bending_factor=float(bf), torsion_factor=float(tf))
+                    semi_axes=semi, source=source, bending_factor=float(bf), torsion_factor=float(tf),
+                    strain_limit=float(sl))
 
 
 def _resolve(generator: str, file):

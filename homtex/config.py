@@ -16,7 +16,8 @@ name                         default      meaning
 ``homogenize_solver``        ``"amg"``    ``homogenize``, ``solve_macro``, ``compression_modulus``
 ``compress_solver``          ``"direct"`` ``compress``, seam cells (``seam_profile``, ``seam_compression``);
                                           small, often ill-conditioned contact systems
-``nonlinear_solver``         ``"direct"`` ``solve_nonlinear`` (Newton steps)
+``nonlinear_solver``         ``"auto"``   ``solve_nonlinear``: "auto" (LU where moments act on free rotations,
+                                          else LDL^T), "ldl", "lu" ("direct" = "ldl")
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
 ``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
                                           diagonal of the frame stiffness (about EA / L)
@@ -40,6 +41,7 @@ from .errors import InputError
 __all__ = ["OPTIONS", "get_options", "option", "set_options"]
 
 SOLVERS = ("amg", "direct", "cg")
+NONLINEAR_SOLVERS = ("auto", "ldl", "lu", "direct")
 
 
 def _solver(v) -> bool:
@@ -66,7 +68,7 @@ _DEFAULTS: dict[str, Any] = {
     "static_solver": "amg",
     "homogenize_solver": "amg",
     "compress_solver": "direct",
-    "nonlinear_solver": "direct",
+    "nonlinear_solver": "auto",
     "tol": 1e-10,
     "contact_penalty": None,
     "modulus_penalty": 5000.0,
@@ -79,7 +81,7 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "static_solver": (_solver, f"one of {SOLVERS}"),
     "homogenize_solver": (_solver, f"one of {SOLVERS}"),
     "compress_solver": (_solver, f"one of {SOLVERS}"),
-    "nonlinear_solver": (_solver, f"one of {SOLVERS}"),
+    "nonlinear_solver": (lambda v: v in NONLINEAR_SOLVERS, f"one of {NONLINEAR_SOLVERS}"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),

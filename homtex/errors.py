@@ -54,3 +54,8 @@ class CellError(InputError):
 
 class StudyError(CellError):
     """A bad study file or option, naming the file, table and key (formatted like CellError)."""
+
+
+class StrainWarning(UserWarning):
+    """A large-rotation solve reached strains beyond an element's elastic limit (``strain_limit``):
+    the co-rotational beam is exact for large rotations but linear elastic in small strains."""

@@ -5,11 +5,11 @@ from pathlib import Path
 
 import pytest
 
-STUDIES = Path(__file__).resolve().parents[1] / "studies" / "experiments"
+STUDIES = Path(__file__).resolve().parents[1] / "studies"
 
 
 def load(name):
-    spec = importlib.util.spec_from_file_location(name, STUDIES / f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, next(STUDIES.glob(f"*/{name}.py")))
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod

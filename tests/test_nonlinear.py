@@ -123,10 +123,12 @@ def test_small_loads_agree_with_the_linear_solve():
     assert diff[0] / diff[1] == pytest.approx(100.0, rel=0.05)
 
 
-def test_column_buckling_amplification_and_elastica():
+@pytest.mark.parametrize("steps", [29, 30, 31])
+def test_column_buckling_amplification_and_elastica(steps):
     """Pinned-free column (cantilever) under a dead axial load with a small lateral imperfection
     load: below P_cr = pi^2 EI / (4 L^2) the lateral tip deflection stays small; above it the column
-    buckles to a large deflection. The amplification below P_cr follows 1 / (1 - P/P_cr)."""
+    buckles to a large deflection. The amplification below P_cr follows 1 / (1 - P/P_cr).
+    (Any number of load steps: before the stability check only 30 landed on the bent branch.)"""
     L, r, n_el = 100.0, 1.0, 30
     frame = line_frame(n_el, L, (1, 0, 0), radius=r, E=E, nu=NU)
     EI = E * np.pi * r ** 4 / 4
@@ -141,7 +143,8 @@ def test_column_buckling_amplification_and_elastica():
         assert amp == pytest.approx(1 / (1 - frac), rel=0.05)
     # post-buckled (elastica): P / P_cr = (2 K(m) / pi)^2, tip deflection 2 k L / K, tip x (2 E(m) / K - 1) L
     ratio = 1.5
-    res = solve_nonlinear(frame, {0: "all"}, {n_el: (-ratio * Pcr, q, 0, 0, 0, 0)}, steps=30, geometric="full")
+    res = solve_nonlinear(frame, {0: "all"}, {n_el: (-ratio * Pcr, q, 0, 0, 0, 0)}, steps=steps, geometric="full")
+    assert res.stable and bool(res.path.stable.all())
     m = brentq(lambda m: (2 * ellipk(m) / np.pi) ** 2 - ratio, 1e-9, 0.999)
     K, Em = ellipk(m), ellipe(m)
     assert res.x[n_el, 1] / L == pytest.approx(2 * np.sqrt(m) / K, rel=2e-3)
@@ -152,8 +155,9 @@ def test_bad_input_is_named():
     frame = line_frame(3, 10.0, (1, 0, 0), radius=0.5, E=E, nu=NU)
     with pytest.raises(InputError, match="geometric"):
         Corotational(frame, geometric="maybe")
-    with pytest.raises(InputError, match="rotations must be zero"):
-        solve_nonlinear(frame, {0: {0: 0, 1: 0, 2: 0, 3: 0.1, 4: 0, 5: 0}}, {3: (0, 1, 0, 0, 0, 0)})
+    # (prescribed rotations are allowed since rotation control exists: tests/test_path_following.py)
+    with pytest.raises(InputError, match="steps"):
+        solve_nonlinear(frame, {0: "all"}, {3: (0, 1, 0, 0, 0, 0)}, steps=0)
     with pytest.raises(SolverError, match="did not converge"):
         solve_nonlinear(frame, {0: "all"}, {3: (0, 0, 0, 0, 0, 1e9)}, steps=1, max_iter=3)
 

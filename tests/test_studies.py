@@ -23,7 +23,7 @@ FOLDERS = ("benchmarks", "verification", "experiments")
 SCRIPTS = sorted(p for folder in FOLDERS for p in (STUDIES / folder).glob("*.py") if not p.name.startswith("_"))
 CONFIGS = sorted((STUDIES / "configs").glob("*.toml"))
 # optional packages a script needs beyond homtex's own dependencies
-NEEDS = {"bench_core.py": ("psutil",)}
+NEEDS = {"bench_core.py": ("psutil",), "bench_corotational.py": ("openseespy.opensees",)}
 
 
 def _id(p: Path) -> str:

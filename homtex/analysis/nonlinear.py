@@ -1,145 +1,51 @@
-"""Geometrically nonlinear frames: co-rotational state and Newton's method.
+"""Geometrically nonlinear frames: :func:`solve_nonlinear` (path following with stability).
 
-:class:`Corotational` holds the large-displacement state of a frame (node translations and
-nodal rotation matrices) and evaluates the exact internal forces and an approximate tangent
-(kernels in :mod:`homtex.fem.corotational`). :func:`solve_nonlinear` solves a frame without
-contact under loads ramped in steps; :func:`homtex.contact.nonlinear.newton_contact` does the
-same with contact (each Newton step is a contact solve linearised at the current state).
-
-Rotations of a node are stored as a rotation matrix Q (3, 3) and updated multiplicatively
-(Q <- exp(spin) Q), so they may grow without limit; reported rotations are rotation vectors
-log(Q) (rad). Strains stay small: each element is linear elastic in its co-rotated frame.
+The co-rotational state and its consistent tangent are :class:`~homtex.analysis.corotational.Corotational`
+(re-exported here); the controls are in :mod:`homtex.analysis.path`, the stability checks in
+:mod:`homtex.analysis.stability`, what is recorded in :mod:`homtex.analysis.records`.
 """
 
 from __future__ import annotations
 
+import logging
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+import xarray as xr
 
 from ..config import option
-from ..errors import InputError, SolverError
-from ..fem.assembly import Assembler
-from ..fem.corotational import add_geometric, corotational_response, gather_ends, log_nodes, rotate_nodes
-from ..linalg.solvers import LinearSolver, constrain
+from ..errors import InputError
 from ..model.frame import Frame
-from ..model.results import ENERGY_KEYS
-from ..model.scene import check_held, parse_fixed, parse_loads
+from ..model.scene import parse_fixed, parse_loads
+from ..model.topology import check_held
+from ..validate import check_int, check_number, check_tol
+from .corotational import GEOMETRIC, Corotational
+from .equilibrium import Equilibrium, Settings
+from .path import follow_arclength, follow_lambda
+from .records import ENERGY_NAMES, PathRecorder
 
-GEOMETRIC = ("tension", "full", "none")
+__all__ = ["CONTROLS", "GEOMETRIC", "Corotational", "NonlinearResult", "solve_nonlinear"]
 
+log = logging.getLogger(__name__)
 
-class Corotational:
-    """Large-rotation state of a frame.
-
-    Parameters
-    ----------
-    frame : Frame (periodic frames keep their fixed image offsets: zero macro strain).
-    geometric : axial-force geometric stiffness in the tangent: "tension" (default; compressed
-        members add none, so the tangent stays positive definite and a Cholesky factor or AMG
-        applies; Newton converges linearly past buckling instead of quadratically), "full"
-        (exact for the axial part; may be indefinite after buckling) or "none".
-
-    Attributes
-    ----------
-    ut : (n, 3) node translations, mm.  Q : (n, 3, 3) nodal rotations.
-    Rr : (m, 3, 3) co-rotated element frames (rows) after the last :meth:`evaluate`.
-    forces : (m, 12) local end forces; energy : (m, 5) energy split (as in the linear solve).
-    """
-
-    def __init__(self, frame: Frame, assembler: Assembler | None = None, *, geometric: str = "tension"):
-        if geometric not in GEOMETRIC:
-            raise InputError(f"geometric must be one of {GEOMETRIC}, got {geometric!r}")
-        self.frame = frame
-        self.geometric = geometric
-        self.asm = assembler or Assembler(frame)
-        n, m = frame.n_nodes, frame.n_elements
-        self.ut = np.zeros((n, 3))
-        self.Q = np.ascontiguousarray(np.broadcast_to(np.eye(3), (n, 3, 3)).copy())
-        self.shift = np.ascontiguousarray(frame.shift, dtype=float)
-        self.arrays = (frame.E * frame.A, frame.G * frame.J, frame.E * frame.Iy, frame.E * frame.Iz,
-                       frame.k * frame.G * frame.A)
-        self.fe = np.empty((m, 2, 6))
-        self.Rr = np.empty((m, 3, 3))
-        self.lcur = np.empty(m)
-        self.theta = np.empty((m, 2, 3))
-        self.forces = np.empty((m, 12))
-        self.energy = np.empty((m, 5))
-        self.fint = np.empty((n, 6))
-
-    # -- state
-    def copy_state(self):
-        return self.ut.copy(), self.Q.copy()
-
-    def set_state(self, state):
-        self.ut[...] = state[0]
-        self.Q[...] = state[1]
-
-    def update(self, du: np.ndarray):
-        """Add increments du (n, 6): translations add, rotations compose (spatial spin)."""
-        du = np.asarray(du, dtype=float)
-        self.ut += du[:, :3]
-        rotate_nodes(self.Q, np.ascontiguousarray(du[:, 3:6]))
-
-    @property
-    def positions(self) -> np.ndarray:
-        """(n, 3) current node positions, mm."""
-        return self.frame.nodes + self.ut
-
-    def u(self) -> np.ndarray:
-        """(n, 6) translations (mm) and rotation vectors log(Q) (rad)."""
-        rot = np.empty((len(self.Q), 3))
-        log_nodes(self.Q, rot)
-        return np.hstack([self.ut, rot])
-
-    # -- forces and tangent
-    def evaluate(self, prestrain_scale: float = 1.0) -> np.ndarray:
-        """Internal force vector (n, 6) at the current state (N, N mm); the residual is f_ext - fint."""
-        f = self.frame
-        eps0 = np.ascontiguousarray(prestrain_scale * f.prestrain, dtype=float)
-        corotational_response(np.ascontiguousarray(self.positions), self.Q, f.elements, self.shift, f.R, f.length,
-                              *self.arrays, eps0, self.fe, self.Rr, self.lcur, self.theta, self.forces,
-                              self.energy)
-        if not np.all(np.isfinite(self.fe)):
-            bad = int(np.flatnonzero(~np.all(np.isfinite(self.fe.reshape(len(self.fe), -1)), axis=1))[0])
-            raise SolverError(f"co-rotational forces are not finite at element {bad} (collapsed to zero length "
-                              "or an end rotation of pi)")
-        p = self.asm.pattern
-        gather_ends(p.node_ptr, p.inc_elem, p.inc_end, self.fe, self.fint)
-        return self.fint
-
-    def tangent(self):
-        """Tangent stiffness (6n x 6n BSR) at the last evaluated state: the linear element in its
-        co-rotated frame plus the axial-force geometric stiffness (``geometric``)."""
-        f = self.frame
-        K = self.asm.stiffness((self.Rr, f.length) + self.arrays)
-        if self.geometric != "none":
-            N = self.forces[:, 6]
-            if self.geometric == "tension":
-                N = np.maximum(N, 0.0)
-            p = self.asm.pattern
-            add_geometric(p.node_ptr, p.inc_elem, p.inc_end, p.slot_self, p.slot_other, self.Rr, self.lcur,
-                          np.ascontiguousarray(N), K.data)
-        return K
-
-    def max_deformational_rotation(self) -> float:
-        """Largest end rotation relative to the co-rotated frame (rad) at the last evaluation: the
-        co-rotational beam's own accuracy limit (refine the mesh when it passes ~0.3)."""
-        if not self.theta.size:
-            return 0.0
-        return float(np.sqrt((self.theta ** 2).sum(axis=-1)).max())
+CONTROLS = ("load", "displacement", "arclength")
 
 
 @dataclass
 class NonlinearResult:
-    """Result of :func:`solve_nonlinear`.
+    """Result of :func:`solve_nonlinear`: the last converged state and the path to it.
 
     Attributes
     ----------
-    u : (n, 6) translations (mm) and rotation vectors (rad). x : (n, 3) deformed positions, mm.
+    u : (n, 6) translations (mm) and rotation vectors log Q (rad). x : (n, 3) deformed positions, mm.
     Q : (n, 3, 3) nodal rotation matrices. forces : (m, 12) local end forces (co-rotated frames).
-    energy : dict of (m,) energies, N mm. reactions : (n, 6) support reactions.
-    history : per load step (load factor, Newton iterations, final residual norm).
+    energy : dict of (m,) energies per element (axial, torsion, bending_y, bending_z, shear), N mm.
+    reactions : (n, 6) support reactions (N, N mm), zero on free DOFs.
+    path : xarray Dataset over ``step`` (see :mod:`homtex.analysis.records`).
+    load_factor : lambda of the last state. stable : whether it is stable; negative_eigenvalues.
+    critical_load_factor : first bifurcation or limit point met (nan if none).
+    history : per state (load factor, Newton iterations, residual), as before the path existed.
     """
 
     frame: Frame
@@ -149,80 +55,144 @@ class NonlinearResult:
     forces: np.ndarray
     energy: dict
     reactions: np.ndarray
+    path: xr.Dataset
+    load_factor: float = 1.0
+    stable: bool = True
+    negative_eigenvalues: int = 0
+    critical_load_factor: float = float("nan")
     history: list = field(default_factory=list)
 
     @property
     def axial_force(self) -> np.ndarray:
+        """(m,) axial force of every element (tension positive), N."""
         return self.forces[:, 6]
 
 
-def solve_nonlinear(frame: Frame, fixed=None, loads=None, *, steps: int = 10, tol: float = 1e-9,
-                    max_iter: int = 40, geometric: str = "full", solver: str | None = None) -> NonlinearResult:
-    """Large-rotation static solve of a frame without contact; loads (and prescribed
-    translations) ramp linearly over ``steps`` equal load steps, Newton iterations in each.
+def solve_nonlinear(frame: Frame, fixed=None, loads=None, *, control: str = "load", steps: int = 10,
+                    tol: float = 1e-9, atol: float | None = None, max_iter: int = 15, max_cuts: int = 10,
+                    geometric: str = "full", solver: str | None = None, perturbation: float = 1e-2,
+                    arc_length: float | None = None, monitor=None) -> NonlinearResult:
+    """Large-rotation static solve of a frame without contact, following the load path.
+
+    The load factor lambda scales the loads and the prescribed motions together (dead loads; a
+    moment keeps its axis; a prescribed rotation vector turns its node about that fixed axis by
+    lambda times its length).
 
     Parameters
     ----------
-    fixed, loads : as :func:`homtex.static.solve_static` (prescribed rotations must be zero:
-        a rotation vector is not additive). Loads keep their direction (dead loads; a moment is a
-        moment about a fixed axis).
-    steps : load steps. tol : convergence when the out-of-balance force on the free DOFs is below
-        tol x (norm of the applied loads and reactions).
-    geometric : tangent option of :class:`Corotational` ("full" by default here: without contact
-        the exact axial geometric stiffness converges fastest).
+    frame : Frame (n nodes, m elements).
+    fixed : supports, as :func:`homtex.static.solve_static`: node -> "all" | [DOFs] (held) |
+        {DOF: value} (prescribed translation, mm, or rotation, rad; DOFs 0..5 = ux uy uz rx ry rz).
+    loads : node -> (Fx, Fy, Fz, Mx, My, Mz), N and N mm (the reference load).
+    control : "load" (lambda = k / steps, the default), "displacement" (the same ramp, driven by
+        non-zero prescribed translations or rotations in ``fixed``; past a turning point of the
+        prescribed motion it raises) or "arclength" (Crisfield's arc length with the loads and
+        prescribed motions as the reference: the path is followed through limit points until
+        lambda reaches 1 or ``steps`` increments are spent). Under "load" and "displacement" a
+        converged state that is unstable is never returned: the critical point is located and
+        recorded and the stable branch is taken along the critical mode; a limit point raises
+        :class:`~homtex.errors.SolverError` naming it and the remedy (control="arclength").
+    steps : requested load steps (cut and regrown automatically) or arc-length increments (>= 1).
+    tol : equilibrium when the out-of-balance force on the free DOFs is below tol x max(|lambda f|,
+        |f_int|) (+ a round-off floor), in (0, 1). atol : an absolute tolerance (N, N mm) used
+        instead when given (as OpenSees' NormUnbalance test).
+    max_iter : Newton iterations per step (>= 1). max_cuts : halvings of a step before giving up.
+    geometric : "full" (or "consistent"): the consistent tangent (the only option here).
+    solver : "auto" (the default of option ``nonlinear_solver``: "lu" where moments are applied to free
+        rotations, else "ldl"), "ldl"
+        (qdldl LDL^T of the symmetric part, symbolic analysis reused; "direct" is an alias) or "lu"
+        (SuperLU on the full nonsymmetric tangent). The skew part of the consistent tangent is
+        -1/2 [m]x per node (m its internal moment): without applied moments it is the residual and
+        LDL^T of the symmetric part converges quadratically (measured: the same iterations as LU on
+        the bend); applied moments out of their plane of rotation need the full tangent (a helix by
+        two end moments: LDL^T converges linearly and stalls).
+    perturbation : size of the perturbation along a critical mode (branch switching), as a
+        fraction of the structure size, in (0, 1).
+    arc_length : first arc length (weighted mm; default: the linear response to the reference load
+        divided by ``steps``).
+    monitor : node indices whose displacements and forces are recorded along the path (``path.u``,
+        ``path.force``, (step, node, dof)); default: the loaded nodes and those with prescribed motions.
+
+    Returns
+    -------
+    NonlinearResult with ``u`` (n, 6), ``x`` (n, 3), ``reactions`` (n, 6) and ``path`` (xarray
+    Dataset over ``step``: load_factor, stable, negative_eigenvalues, iterations, residual, the
+    energy split, external_work, energy_balance, strains; attributes critical_load_factor, check,
+    status). Never a non-converged state.
 
     Raises
     ------
-    SolverError when a step does not converge in ``max_iter`` iterations (with the step and the
-    residual), or the state becomes non-finite.
+    InputError for bad arguments (naming the argument and its range); SolverError for limit points
+    under load control, turning points under displacement control and steps that do not converge.
     """
     if not isinstance(frame, Frame):
         raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
-    if int(steps) < 1:
-        raise InputError(f"steps must be >= 1, got {steps!r}")
+    if control not in CONTROLS:
+        raise InputError(f"control must be one of {CONTROLS}, got {control!r}")
+    steps = check_int(steps, "steps", ge=1, le=10 ** 6)
+    settings = Settings(tol=check_tol(tol), atol=None if atol is None else check_number(atol, "atol", gt=0.0),
+                        max_iter=check_int(max_iter, "max_iter", ge=1, le=10000),
+                        max_cuts=check_int(max_cuts, "max_cuts", ge=0, le=40),
+                        perturbation=check_number(perturbation, "perturbation", gt=0.0, lt=1.0))
+    arc_length = None if arc_length is None else check_number(arc_length, "arc_length", gt=0.0)
     solver = option("nonlinear_solver", solver)
+    if geometric not in ("full", "consistent"):
+        raise InputError(f"geometric must be 'full' or 'consistent' for solve_nonlinear (the approximate tangents "
+                         f"{GEOMETRIC} are for contact), got {geometric!r}")
     n = frame.n_nodes
-    mask, up = parse_fixed(fixed, n)
-    if np.any(up.reshape(n, 6)[:, 3:] != 0.0):
-        raise InputError("solve_nonlinear: prescribed rotations must be zero (rotation vectors do not add up)")
+    mask, ubar = parse_fixed(fixed, n)
+    f = parse_loads(loads, n)
+    moments = np.zeros((n, 6), dtype=bool)
+    moments[:, 3:] = True
+    used = solver
+    if solver == "auto":
+        used = "lu" if np.any(f[moments.ravel() & ~mask] != 0.0) else "ldl"
+    settings.solver = "lu" if used == "lu" else "ldl"
+    if control == "displacement" and not np.any(ubar[mask] != 0.0):
+        raise InputError("control='displacement' needs a non-zero prescribed translation or rotation in fixed "
+                         "(node -> {dof: value})")
+    if control == "arclength" and not (np.any(f[~mask] != 0.0) or np.any(ubar[mask] != 0.0)):
+        raise InputError("control='arclength' needs a reference load on a free DOF (loads) or a non-zero "
+                         "prescribed motion (fixed)")
     check_held(frame, mask)
-    f_ext = parse_loads(loads, n)
-    cor = Corotational(frame, geometric=geometric)
-    # round-off floor of the internal forces: EA x machine epsilon x (coordinates / length)
-    floor = 1e-13 * float(np.max(cor.arrays[0])) * np.sqrt(n)
-    history = []
-    for step in range(1, int(steps) + 1):
-        lam = step / int(steps)
-        fs = lam * f_ext
-        target = lam * up.reshape(n, 6)[:, :3]
-        res_norm = np.inf
-        for it in range(1, max_iter + 1):
-            fint = cor.evaluate().ravel()
-            r = fs - fint
-            ref = max(np.linalg.norm(fs), np.linalg.norm(fint), 1e-300)
-            res_norm = float(np.linalg.norm(np.where(mask, 0.0, r)))
-            presc = np.zeros((n, 6))
-            presc[:, :3] = target - cor.ut
-            presc = presc.ravel()
-            if res_norm <= tol * ref + floor and np.abs(presc[mask]).max(initial=0.0) == 0.0:
-                break
-            K = cor.tangent()
-            b = r - K @ np.where(mask, presc, 0.0)
-            A = constrain(K, mask)
-            b[mask] = A.diagonal()[mask] * presc[mask]
-            lin = LinearSolver(A, method=solver, tol=1e-6)   # a Newton step needs no more
-            du, _ = lin.solve(b)
-            du[mask] = presc[mask]
-            if not np.all(np.isfinite(du)):
-                raise SolverError(f"Newton step {it} of load step {step} is not finite")
-            cor.update(du.reshape(n, 6))
+    eq = Equilibrium(frame, mask, f, ubar, settings)
+    if monitor is None:
+        monitor = np.flatnonzero(np.any((f != 0.0).reshape(n, 6) | (ubar != 0.0).reshape(n, 6), axis=1))
+    else:
+        monitor = np.atleast_1d(np.asarray(monitor))
+        if not np.issubdtype(monitor.dtype, np.integer) or monitor.ndim != 1 or \
+                np.any((monitor < 0) | (monitor >= n)):
+            raise InputError(f"monitor must be node indices in 0..{n - 1}, got {monitor!r}")
+    rec = PathRecorder(control, steps, monitor)
+    try:
+        if control == "arclength":
+            follow_arclength(eq, rec, steps, arc_length)
         else:
-            raise SolverError(f"solve_nonlinear: load step {step}/{steps} (load factor {lam:.4g}) did not converge in "
-                              f"{max_iter} Newton iterations (out-of-balance force {res_norm:.3e} N, "
-                              f"tolerance {tol:g} x {ref:.3e} N); use more steps")
-        history.append((lam, it - 1, res_norm))
-    fint = cor.evaluate()
-    reactions = np.where(mask.reshape(n, 6), fint - f_ext.reshape(n, 6), 0.0)
-    return NonlinearResult(frame=frame, u=cor.u(), x=cor.positions, Q=cor.Q.copy(), forces=cor.forces.copy(),
-                           energy=dict(zip(ENERGY_KEYS, cor.energy.T.copy())), reactions=reactions,
-                           history=history)
+            follow_lambda(eq, rec, steps, control)
+    finally:
+        rec.finish()
+    return _result(eq, rec, solver)
+
+
+def _result(eq: Equilibrium, rec: PathRecorder, solver: str) -> NonlinearResult:
+    cor = eq.cor
+    n = eq.n
+    fint = eq.fint.reshape(n, 6)
+    reactions = np.where(eq.mask.reshape(n, 6), fint - eq.lam * eq.f.reshape(n, 6), 0.0)
+    path = rec.dataset({"tol": eq.s.tol, "atol": -1.0 if eq.s.atol is None else eq.s.atol, "solver": solver,
+                        "factorisation": "SuperLU of the full tangent" if eq.s.solver == "lu" else
+                        "qdldl LDL^T of the symmetric part",
+                        "evaluations": eq.evaluations, "factorisations": eq.factorisations,
+                        "ldl_refinements": eq.sys.refinements, "ldl_fallbacks": eq.sys.fallbacks})
+    neg = -1 if eq.negative is None else int(eq.negative)
+    if neg > 0:          # arc length only: load and displacement control never accept one
+        msg = (f"solve_nonlinear returns an unstable state (load factor {eq.lam:.6g}, {neg} negative eigenvalue(s)): "
+               "arc length follows the path it is on and does not switch branches")
+        log.warning(msg)
+        warnings.warn(msg, RuntimeWarning, stacklevel=3)
+    history = [(float(a), int(b), float(c)) for a, b, c in zip(path.load_factor.values, path.iterations.values,
+                                                                   path.residual.values)]
+    return NonlinearResult(frame=eq.frame, u=cor.u(), x=cor.positions, Q=cor.Q.copy(), forces=cor.forces.copy(),
+                           energy=dict(zip(ENERGY_NAMES, cor.energy.T.copy())), reactions=reactions, path=path,
+                           load_factor=float(eq.lam), stable=neg == 0, negative_eigenvalues=neg,
+                           critical_load_factor=rec.critical_load_factor(), history=history)

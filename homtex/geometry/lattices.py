@@ -161,7 +161,7 @@ def strut_normals(d: np.ndarray) -> np.ndarray:
 def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_axes=None,
                   elements_per_strut: int = 1, repeat=None, periodic: bool = True,
                   waviness: float = 0.0, contact_radius=None, bending_factor=None, torsion_factor=None,
-                  **cell_args) -> Frame:
+                  strain_limit=None, **cell_args) -> Frame:
     """A beam frame of a lattice.
 
     Parameters
@@ -180,6 +180,7 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
     contact_radius : contact radius of the struts, mm (default: the section radius).
     bending_factor, torsion_factor : bending / torsional rigidity relative to the solid section
         (default 1, :class:`homtex.Frame`).
+    strain_limit : elastic limit of axial/shear strain (default 0.02, :class:`homtex.Frame`).
     """
     if isinstance(cell, str):
         if cell not in GENERATORS:
@@ -223,7 +224,7 @@ def lattice_frame(cell: LatticeCell | str, *, radius=None, E=1.0, nu=0.3, semi_a
     inner, el, im = _subdivide(x0, x1, a, b, img, nel, len(nodes), waviness, normal)
     allnodes = np.vstack([nodes, inner])
     kw = dict(radius=radius, E=E, nu=nu, semi_axes=semi_axes, contact_radius=contact_radius,
-              bending_factor=bending_factor, torsion_factor=torsion_factor)
+              bending_factor=bending_factor, torsion_factor=torsion_factor, strain_limit=strain_limit)
     if periodic:
         return Frame(allnodes, el, periods=cell.basis * reps[:, None], images=im, **kw)
     return Frame(allnodes, el, **kw)
@@ -262,7 +263,7 @@ def _build(cell: LatticeCell, parameters, yarns, resolution, table="parameters")
     wav = get_number(parameters, "waviness", table, default=0.0, ge=-0.5, le=0.5)
     sec = dict(semi_axes=(y.a, y.b)) if y.semi_axes else dict(radius=y.radius)
     frame = lattice_frame(cell, E=y.E, nu=y.nu, contact_radius=y.rc, bending_factor=y.bending_factor,
-                          torsion_factor=y.torsion_factor, elements_per_strut=nel,
+                          torsion_factor=y.torsion_factor, strain_limit=y.strain_limit, elements_per_strut=nel,
                           repeat=repeat, waviness=wav, **sec)
     info = {"lattice": cell.name, "groups": {"struts": np.ones(frame.n_elements, dtype=bool)}}
     return frame, info

@@ -222,7 +222,7 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
     fab_fields["prestrain"] = np.zeros(fab.n_elements)
     stitch_fields = {"semi_axes": np.column_stack([rad, rad]), "E": np.full(ms, E_s), "nu": np.full(ms, nu_s),
                      "yarn": np.full(ms, sid), "ref": ref, "contact_radius": np.full(ms, r_s),
-                     "prestrain": np.full(ms, eps0)}
+                     "prestrain": np.full(ms, eps0), "strain_limit": np.full(ms, float(yt.strain_limit))}
     frame = Frame(nodes, np.vstack([fab.elements, s_el]), periods=fab.periods,
                   images=np.vstack([fab.images, s_img]), **stack_fields(fab_fields, stitch_fields))
     m_f = fab.n_elements

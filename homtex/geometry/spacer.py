@@ -435,7 +435,7 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
     n_yarn_el = len(elements)
     frame0 = Frame(nodes, elements, periods=periods, images=images, yarn=yarn,
                    ref=reference_vectors(nodes, elements, images @ periods),
-                   **{k: v for k, v in fields.items() if k not in ("bending_factor", "torsion_factor")})
+                   **{k: v for k, v in fields.items() if k not in ("bending_factor", "torsion_factor", "strain_limit")})
     a_n, b_n, img = _bonds(plans, nodes, elements, yarn, fields["contact_radius"], is_control, periods, T, levels,
                            bond_distance)
     if len(a_n):

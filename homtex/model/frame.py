@@ -13,13 +13,14 @@ import numpy as np
 
 from ..errors import InputError
 from .arrays import MAX_COORD, as_index, as_real, per_element, to_array
-from .sections import section_properties
+from .sections import DEFAULT_STRAIN_LIMIT, section_properties
 
 #: per-element constructor arguments of a Frame, in the order :meth:`Frame.element_fields` returns them
 ELEMENT_FIELDS = ("semi_axes", "E", "nu", "yarn", "ref", "contact_radius", "prestrain", "bending_factor",
-                  "torsion_factor")
+                  "torsion_factor", "strain_limit")
 #: defaults of the fields that have one (used when frames are joined, :func:`stack_fields`)
-FIELD_DEFAULTS = {"prestrain": 0.0, "bending_factor": 1.0, "torsion_factor": 1.0}
+FIELD_DEFAULTS = {"prestrain": 0.0, "bending_factor": 1.0, "torsion_factor": 1.0,
+                  "strain_limit": DEFAULT_STRAIN_LIMIT}
 #: largest Young's modulus accepted, MPa (diamond is 1.2e6; beyond this only an input error)
 MAX_MODULUS = 1e8
 #: smallest radius accepted, mm (below it r^4 underflows)
@@ -68,15 +69,26 @@ class Frame:
         (default 1: the solid section). A multifilament bundle bends and twists more easily
         than a solid rod of its section (its fibres slide) and more stiffly than its fibres
         alone; the axial stiffness stays that of the section.
+    strain_limit : float or array (m,), optional
+        Largest axial or shear strain the element is trusted to (default
+        :data:`~homtex.model.sections.DEFAULT_STRAIN_LIMIT` = 0.02). The beam is linear elastic in
+        small strains (large rotations are exact in the co-rotational solve); the large-rotation
+        solver warns and records when a state goes beyond it. 0.02 because polyester and polyamide
+        fibres leave their linear elastic range at about 1.5-3 % strain, and at 2 % the engineering
+        strain of the element differs from the Green-Lagrange strain of a finite-strain rod by 1 %
+        of itself (eps / 2), the error the small-strain element makes there.
     """
 
     def __init__(self, nodes, elements, *, radius=None, E=None, nu=None, yarn=None,
                  semi_axes=None, ref=None, periods=None, images=None,
-                 contact_radius=None, prestrain=None, bending_factor=None, torsion_factor=None):
+                 contact_radius=None, prestrain=None, bending_factor=None, torsion_factor=None,
+                 strain_limit=None):
         self._topology(nodes, elements)
         m = len(self.elements)
         self._periodicity(periods, images, m)
         self._sections(radius, semi_axes, E, nu, yarn, contact_radius, prestrain, bending_factor, torsion_factor, m)
+        self.strain_limit = per_element(DEFAULT_STRAIN_LIMIT if strain_limit is None else strain_limit, m,
+                                        "strain_limit", positive=True, limit=1.0, yarn=self.yarn)
         self._local_frames(ref, m)
         props = section_properties(self.a, self.b, self.nu)
         self.A, self.Iy, self.Iz, self.J, self.k = (props[x] for x in ("A", "Iy", "Iz", "J", "k"))
@@ -279,7 +291,8 @@ class Frame:
         """
         d = {"semi_axes": np.column_stack([self.a, self.b]), "E": self.E, "nu": self.nu, "yarn": self.yarn,
              "ref": self.R[:, 1], "contact_radius": self.contact_radius, "prestrain": self.prestrain,
-             "bending_factor": self.bending_factor, "torsion_factor": self.torsion_factor}
+             "bending_factor": self.bending_factor, "torsion_factor": self.torsion_factor,
+             "strain_limit": self.strain_limit}
         assert tuple(d) == ELEMENT_FIELDS
         if select is not None:
             d = {k: v[select] for k, v in d.items()}

@@ -20,6 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: default elastic limit of an element's axial and shear strain (see :class:`homtex.Frame`): polyester
+#: and polyamide fibres leave their linear range at about 1.5-3 % strain, and at 2 % the small-strain
+#: element's engineering strain is 1 % off a finite-strain rod's Green-Lagrange strain
+DEFAULT_STRAIN_LIMIT = 0.02
+
 
 def shear_factor(nu):
     """Cowper's shear correction factor of a solid circle, k = 6(1+nu)/(7+6nu)."""
@@ -71,6 +76,9 @@ class YarnType:
     bending_factor, torsion_factor : float
         Bending and torsional rigidity relative to the solid section (see :class:`homtex.Frame`),
         default 1.
+    strain_limit : float
+        Largest axial or shear strain the yarn is trusted to stay elastic (default
+        :data:`DEFAULT_STRAIN_LIMIT` = 0.02); the large-rotation solver warns beyond it.
     source : str
         Where the values come from (literature reference or "assumption").
     """
@@ -84,6 +92,7 @@ class YarnType:
     source: str = ""
     bending_factor: float = 1.0
     torsion_factor: float = 1.0
+    strain_limit: float = DEFAULT_STRAIN_LIMIT
 
     @property
     def a(self) -> float:
@@ -103,7 +112,7 @@ class YarnType:
 def yarn_fields(types, which) -> dict:
     """Per-element :class:`~homtex.Frame` arguments of elements made of yarn types:
     element e is made of ``types[which[e]]``. Returns {semi_axes (m, 2), E, nu, contact_radius,
-    bending_factor, torsion_factor (m,)} (mm, MPa, 1)."""
+    bending_factor, torsion_factor, strain_limit (m,)} (mm, MPa, 1)."""
     which = np.asarray(which, dtype=np.int64)
     table = {
         "semi_axes": np.array([[t.a, t.b] for t in types], dtype=float).reshape(-1, 2),
@@ -112,5 +121,6 @@ def yarn_fields(types, which) -> dict:
         "contact_radius": np.array([t.rc for t in types], dtype=float),
         "bending_factor": np.array([t.bending_factor for t in types], dtype=float),
         "torsion_factor": np.array([t.torsion_factor for t in types], dtype=float),
+        "strain_limit": np.array([t.strain_limit for t in types], dtype=float),
     }
     return {k: np.ascontiguousarray(v[which]) for k, v in table.items()}

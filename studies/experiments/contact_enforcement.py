@@ -59,9 +59,9 @@ OUT = results/contact_enforcement) and copies the chart to ``docs/studies/``; pr
 
 from __future__ import annotations
 
-import argparse
 import logging
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -73,6 +73,9 @@ from homtex.contact.ccd import displacement_cap, pair_step_bound, plate_step_bou
 from homtex.contact.friction import friction_potential, plate_friction_lag
 from homtex.contact.plates import plate_gaps, plate_potential
 from homtex.contact.potential import Enforcement, assemble_blocks, pair_gaps, pair_potential, pair_stencil
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, setup  # noqa: E402
 
 R = 0.1                    # yarn radius, mm
 F = 1.0                    # load per node, N
@@ -415,12 +418,15 @@ def summary(ds):
     return "\n".join(lines)
 
 
+def main(argv=None) -> None:
+    p = parser(__file__, __doc__)
+    p.add_argument("--no-docs", action="store_true", help="do not copy the chart to docs/studies")
+    p.add_argument("-v", action="store_true", help="log every run")
+    a = p.parse_args(argv)
+    out = setup(a)
+    logging.getLogger().setLevel(logging.INFO if a.v else logging.WARNING)
+    print(summary(run(out, quick=a.quick, docs=not (a.no_docs or a.quick))))
+
+
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", nargs="?", default="results/contact_enforcement")
-    ap.add_argument("--quick", action="store_true", help="a subset (a few seconds)")
-    ap.add_argument("--no-docs", action="store_true", help="do not copy the chart to docs/studies")
-    ap.add_argument("-v", action="store_true", help="log every run")
-    a = ap.parse_args()
-    logging.basicConfig(level=logging.INFO if a.v else logging.WARNING, format="%(message)s")
-    print(summary(run(Path(a.out), quick=a.quick, docs=not a.no_docs)))
+    main()

@@ -20,18 +20,21 @@ hence the size thresholds of ``homtex.contact.potential.PARALLEL_MIN``.
 
 Usage::
 
-    python studies/experiments/bench_contact_kernels.py [OUT] [--quick]
+    python studies/benchmarks/bench_contact_kernels.py [OUT] [--quick]
 
 Writes ``OUT/bench_contact_kernels.nc`` (default OUT = results/contact_enforcement).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 import homtex
 from homtex.contact import potential as pot
@@ -107,17 +110,31 @@ def run(out: Path, sizes, repeat=3):
         {"seconds": (("size", "mode", "kernel"), T, {"units": "s", "long_name": "best wall time of one call"}),
          "pairs": ("size", n_pairs, {"units": "1", "long_name": "candidate pairs"}),
          "active": ("size", n_active, {"units": "1", "long_name": "pairs with gap < ghat"})},
-        coords={"size": np.asarray(sizes), "mode": ["serial", "parallel"], "kernel": list(kernels)},
+        coords={"size": ("size", np.asarray(sizes), {"units": "1", "long_name": "yarns per direction of the grid"}),
+                "mode": ("mode", ["serial", "parallel"], {"units": "1", "long_name": "numba threads: one or all"}),
+                "kernel": ("kernel", list(kernels), {"units": "1", "long_name": "contact kernel"})},
         attrs={"threads": int(pot.numba.get_num_threads()), "ghat_mm": GHAT, "radius_mm": R,
                "homtex_version": homtex.__version__ if hasattr(homtex, "__version__") else "",
                "note": "serial/parallel: numba kernels forced to one or all threads"})
-    ds.to_netcdf(out / "bench_contact_kernels.nc")
+    save_netcdf(ds, out / "bench_contact_kernels.nc")
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for k, name in enumerate(kernels):
+        for p, (mode, ls) in enumerate((("serial", "-"), ("parallel", "--"))):
+            ax.plot(n_pairs, T[:, p, k] * 1e3, ls, marker="o", label=f"{name}, {mode}")
+    ax.set(xscale="log", yscale="log", xlabel="candidate pairs, 1", ylabel="time per call, ms",
+           title="large-motion contact kernels (2-core machine)")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    save_figure(fig, out / "bench_contact_kernels.png")
     return ds
 
 
+def main(argv=None) -> None:
+    p = parser(__file__, __doc__)
+    a = p.parse_args(argv)
+    run(setup(a), (36,) if a.quick else (36, 360))
+
+
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", nargs="?", default="results/contact_enforcement")
-    ap.add_argument("--quick", action="store_true", help="only ~1e3 pairs")
-    a = ap.parse_args()
-    run(Path(a.out), (36,) if a.quick else (36, 360))
+    main()

@@ -1,0 +1,254 @@
+"""The tangent stiffness on the free DOFs: a pattern built once, a factorisation reused.
+
+:class:`FreeSystem` assembles the element tangents (m, 12, 12) of
+:func:`homtex.fem.corotational.corotational_tangent` straight into a CSC matrix of the free DOFs
+(upper triangle of the symmetric part, slots precomputed per element entry, one numba pass) and
+factors it with qdldl (LDL^T: the fill-reducing ordering and the elimination tree are computed
+once, each Newton iteration is a numeric ``update``). By Sylvester's law of inertia the number of
+negative entries of D is the number of negative eigenvalues of the tangent: the stability of the
+state comes with the factor.
+
+Why these choices (measured on the 2-core EPYC of the project, 72 x 72 beam net, 29 400 free
+DOFs): qdldl numeric update 0.32 s, SuperLU with its MMD ordering 0.27-0.36 s per factorisation but
+no reuse of the ordering and no inertia; CHOLMOD (scikit-sparse, reference BLAS) 0.25 s but
+positive definite only. The symmetric part suffices for Newton: the skew part of the consistent
+tangent is -1/2 [m]x on each node's rotation block, m the node's internal moment, which is the
+residual where no moment is applied (quadratic convergence kept); ``method="lu"`` factors the full
+nonsymmetric tangent with SuperLU where moments are applied about fixed axes.
+
+LDL^T without pivoting may lose accuracy on indefinite matrices: every solve is checked against
+the assembled matrix, refined, and redone with pivoting (SuperLU) when that does not help.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..errors import SolverError
+from ..fem.corotational_system import scatter_free, sym_upper_matvec
+
+try:
+    import qdldl as _qdldl
+except Exception:  # pragma: no cover - qdldl is a declared dependency
+    _qdldl = None
+
+log = logging.getLogger(__name__)
+
+try:
+    from threadpoolctl import threadpool_limits
+except Exception:  # pragma: no cover
+    threadpool_limits = None
+
+
+def one_blas_thread():
+    """BLAS on one thread for small dense eigenproblems (threads only wait on a shared machine:
+    a 3D roll-up took 5 s instead of 0.2 s with them)."""
+    return threadpool_limits(1, user_api="blas") if threadpool_limits else contextlib.nullcontext()
+
+
+METHODS = ("ldl", "lu")
+
+
+def _slots(frame, fidx, upper: bool):
+    """CSC pattern (indptr, indices) of the free-DOF matrix and the slot of every element entry."""
+    el = frame.elements
+    ar = np.arange(6)
+    g = np.concatenate([6 * el[:, :1] + ar, 6 * el[:, 1:] + ar], axis=1)       # (m, 12)
+    fg = fidx[g]
+    r = np.broadcast_to(fg[:, :, None], (len(el), 12, 12))
+    c = np.broadcast_to(fg[:, None, :], (len(el), 12, 12))
+    keep = (r >= 0) & (c >= 0)
+    if upper:
+        keep &= r <= c
+    nf = int(fidx.max()) + 1 if fidx.size and fidx.max() >= 0 else 0
+    key = c[keep].astype(np.int64) * nf + r[keep]
+    diag = np.arange(nf, dtype=np.int64) * (nf + 1)           # every diagonal entry is stored
+    ukey = np.unique(np.concatenate([key, diag]))
+    cols = ukey // nf
+    indices = (ukey % nf).astype(np.int32)
+    indptr = np.zeros(nf + 1, dtype=np.int32)
+    np.cumsum(np.bincount(cols, minlength=nf), out=indptr[1:])
+    emap = np.full((len(el), 12, 12), -1, dtype=np.int32)
+    emap[keep] = np.searchsorted(ukey, key).astype(np.int32)
+    return indptr, indices, emap
+
+
+class FreeSystem:
+    """Tangent on the free DOFs of a frame, assembled into a fixed pattern and factored.
+
+    Parameters
+    ----------
+    frame : the Frame. mask : (6n,) bool, constrained DOFs.
+    method : "ldl" (qdldl on the symmetric part; default) or "lu" (SuperLU on the full tangent).
+
+    Attributes
+    ----------
+    free : (nf,) global indices of the free DOFs. A : (nf, nf) CSC upper triangle of the
+    symmetric part (``data`` refilled by :meth:`assemble`). negative : number of negative pivots
+    of the last LDL^T (None when only an LU factor exists).
+    """
+
+    def __init__(self, frame, mask: np.ndarray, method: str = "ldl"):
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}")
+        if _qdldl is None:
+            raise ImportError("the large-rotation solver needs qdldl (LDL^T with reused symbolic analysis and the "
+                              "inertia of the tangent): pip install qdldl")
+        self.method = method
+        self._frame = frame
+        self.mask = np.asarray(mask, dtype=bool)
+        self.free = np.flatnonzero(~self.mask)
+        nf = len(self.free)
+        self.nf = nf
+        fidx = np.full(self.mask.size, -1, dtype=np.int64)
+        fidx[self.free] = np.arange(nf)
+        indptr, indices, self.emap = _slots(frame, fidx, upper=True)
+        self.A = sp.csc_matrix((np.zeros(len(indices)), indices, indptr), shape=(nf, nf))
+        self.full_map = None
+        if self.method == "lu":
+            fp, fi, self.full_map = _slots(frame, fidx, upper=False)
+            self.F = sp.csc_matrix((np.zeros(len(fi)), fi, fp), shape=(nf, nf))
+        self._qd = None
+        self._lu = None
+        self._sym = None
+        self.negative = None
+        self.refinements = 0
+        self.fallbacks = 0
+
+    # -- assembly
+    def assemble(self, Ke: np.ndarray) -> None:
+        """Fill the free-DOF matrices from element tangents Ke (m, 12, 12)."""
+        scatter_free(Ke, self.emap, self.A.data)
+        if self.full_map is not None:
+            _scatter_full(Ke, self.full_map, self.F.data)
+        self._sym = None
+
+    def shift_diagonal(self, sigma: float, base: np.ndarray | None = None) -> np.ndarray:
+        """Set the diagonal of the free matrix to base (1 + sigma) (base: the assembled diagonal,
+        returned when not given) to make it positive definite; refactor afterwards."""
+        slots = self.A.indptr[1:] - 1          # rows are sorted: the diagonal ends each column
+        if base is None:
+            base = self.A.data[slots].copy()
+        self.A.data[slots] = base + sigma * np.abs(base)
+        self._sym = None
+        return base
+
+    def symmetric(self) -> sp.csc_matrix:
+        """The full symmetric matrix (both triangles) of the last assembly."""
+        if self._sym is None:
+            U = self.A
+            self._sym = (U + U.T - sp.diags(U.diagonal())).tocsc()
+        return self._sym
+
+    # -- factorisation
+    def factor(self, inertia: bool = True) -> None:
+        """Factor the last assembled matrix (numeric only after the first call)."""
+        self.negative = None
+        if self.method == "lu":
+            self._lu = _splu(self.F)
+            if inertia:
+                self._ldl(inertia=True, required=False)
+            return
+        self._ldl(inertia=inertia, required=True)
+
+    def _ldl(self, inertia: bool, required: bool) -> None:
+        A = self.A
+        try:
+            if self._qd is None:
+                self._qd = _qdldl.Solver(A, upper=True)
+            else:
+                self._qd.update(A, upper=True)
+        except RuntimeError:
+            # an exactly zero pivot (a singular tangent hit on the nose): perturb the diagonal by
+            # round-off and factor again; Newton absorbs the perturbation
+            d = np.abs(A.diagonal())
+            eps = 1e-13 * float(d.max(initial=1.0))
+            B = A + eps * sp.eye(A.shape[0], format="csc")
+            B = sp.csc_matrix((B.data, B.indices, B.indptr), shape=A.shape)
+            if B.nnz != A.nnz:
+                raise SolverError("the tangent's pattern changed") from None
+            try:
+                self._qd = _qdldl.Solver(B, upper=True)
+            except RuntimeError:
+                self._qd = None
+                if required:
+                    self._lu = _splu(self.symmetric())
+                return
+        if inertia:
+            _, D, _ = self._qd.factors()
+            self.negative = int(np.count_nonzero(D < 0.0))
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """x with (free tangent) x = b, checked against the assembled matrix and refined; (nf,)."""
+        if self.method == "lu" or self._qd is None:
+            return self._lu.solve(b)
+        x = self._qd.solve(b)
+        nb = float(np.linalg.norm(b))
+        if nb == 0.0:
+            return x
+        r = b - self.matvec(x)
+        for _ in range(3):
+            err = float(np.linalg.norm(r)) / nb
+            if err <= 1e-9:
+                return x
+            self.refinements += 1
+            x = x + self._qd.solve(r)
+            r = b - self.matvec(x)
+        if float(np.linalg.norm(r)) / nb > 1e-6:
+            # LDL^T without pivoting failed on an indefinite matrix: pivoting LU for this solve
+            self.fallbacks += 1
+            log.debug("LDL^T solve inaccurate (%.1e); SuperLU with pivoting", float(np.linalg.norm(r)) / nb)
+            x = _splu(self.symmetric()).solve(b)
+        return x
+
+    def full(self, Ke: np.ndarray) -> sp.csc_matrix:
+        """The full (nonsymmetric) free-DOF tangent assembled from Ke (m, 12, 12)."""
+        if self.full_map is None:
+            fidx = np.full(self.mask.size, -1, dtype=np.int64)
+            fidx[self.free] = np.arange(self.nf)
+            fp, fi, self.full_map = _slots(self._frame, fidx, upper=False)
+            self.F = sp.csc_matrix((np.zeros(len(fi)), fi, fp), shape=(self.nf, self.nf))
+        _scatter_full(Ke, self.full_map, self.F.data)
+        return self.F
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """Symmetric free-DOF matrix (last assembly) times x (nf,)."""
+        out = np.empty(self.nf)
+        A = self.A
+        sym_upper_matvec(A.indptr, A.indices, A.data, np.ascontiguousarray(x, dtype=float), out)
+        return out
+
+
+def _splu(A):
+    try:
+        return spla.splu(sp.csc_matrix(A))
+    except RuntimeError as err:     # "Factor is exactly singular"
+        raise SolverError(f"the tangent stiffness is singular ({err})") from err
+
+
+def _scatter_full(Ke, fmap, data):
+    data[:] = 0.0
+    ok = fmap >= 0
+    np.add.at(data, fmap[ok], Ke[ok])
+
+
+def real_negative_eigenvalues(K: sp.spmatrix, k: int = 8) -> int:
+    """Number of real negative eigenvalues of a nonsymmetric matrix (divergence modes): all of
+    them for small matrices (dense), else among the k eigenvalues nearest zero (shift-invert)."""
+    n = K.shape[0]
+    if n <= 600:
+        with one_blas_thread():
+            ev = np.linalg.eigvals(K.toarray())
+    else:
+        try:
+            ev = spla.eigs(sp.csc_matrix(K), k=min(k, n - 2), sigma=0.0, which="LM", return_eigenvectors=False)
+        except RuntimeError:
+            ev = spla.eigs(sp.csc_matrix(K), k=min(k, n - 2), sigma=-1e-10, which="LM", return_eigenvectors=False)
+    scale = max(float(np.abs(ev).max(initial=0.0)), 1e-300)
+    real = np.abs(ev.imag) <= 1e-9 * scale + 1e-12 * np.abs(ev.real)
+    return int(np.count_nonzero(real & (ev.real < 0.0)))
