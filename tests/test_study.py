@@ -122,6 +122,10 @@ def test_dask_local_cluster(tmp_path):
         # the address path (a Client made by the runner) resumes the same folder
         (tmp_path / "b" / "points" / "00004.nc").unlink()
         ds2 = run_study(p, tmp_path / "b", scheduler=cluster.scheduler_address, progress=False)
+        # a worker's address is not mistaken for the scheduler's
+        worker = next(iter(client.scheduler_info()["workers"]))
+        with pytest.raises(StudyError, match=r"answers as a dask Worker, not as the scheduler"):
+            run_study(p, tmp_path / "c", scheduler=worker, progress=False)
     xr.testing.assert_identical(ds, serial)
     xr.testing.assert_identical(ds2, serial)
 

@@ -35,6 +35,7 @@ import logging
 import multiprocessing
 import os
 import shutil
+import socket
 import time
 import warnings
 from concurrent.futures import BrokenExecutor, ProcessPoolExecutor, as_completed
@@ -302,11 +303,12 @@ class _Dask:
             self.client, self.own = scheduler, False
         else:
             try:
+                _probe_scheduler(scheduler, timeout)
                 self.client, self.own = Client(scheduler, timeout=timeout, set_as_default=False), True
             except Exception as exc:  # noqa: BLE001 - refused, timed out, a bad address: one line
                 first = (str(exc).splitlines() or [type(exc).__name__])[0]
-                raise StudyError(f"cannot reach the dask scheduler at {scheduler!r} within {timeout:g} s "
-                                 f"({type(exc).__name__}: {first}); start it (dask scheduler), check the "
+                raise StudyError(f"cannot reach the dask scheduler at {scheduler!r} ({type(exc).__name__}: "
+                                 f"{first}; connect timeout {timeout:g} s): start it (dask scheduler), check the "
                                  "address, or run without a scheduler (local processes)") from None
         self.n_workers = len(self.client.scheduler_info().get("workers", {}))
         if self.n_workers == 0:
@@ -328,6 +330,65 @@ class _Dask:
     def close(self):
         if self.own:
             self.client.close()
+
+
+def _probe_scheduler(address, timeout: float) -> None:
+    """Check a scheduler address before a Client is made: a plain TCP connect (a refused port or
+    an unknown host fail at once, an unroutable one after ``timeout``), then, for tcp://, a dask
+    ``identity`` call with a deadline (a Client waits forever on a peer that accepts but never
+    answers) that also tells a worker's address from the scheduler's."""
+    from distributed.comm import parse_address, parse_host_port
+
+    if not isinstance(address, str):
+        raise TypeError(f"a scheduler address is a string such as 'tcp://host:8786', got {address!r}")
+    scheme, location = parse_address(address)
+    if scheme not in ("tcp", "tls"):
+        return
+    host, port = parse_host_port(location)
+    with socket.create_connection((host, int(port)), timeout=timeout):
+        pass
+    if scheme != "tcp":  # tls needs the security settings; the Client checks the rest
+        return
+    answer = _identity(address, timeout)
+    kind = answer.get("type") if isinstance(answer, dict) else None
+    if kind != "Scheduler":
+        raise ConnectionError(f"the address answers as a dask {kind}, not as the scheduler" if kind else
+                              "the address does not answer as a dask scheduler")
+
+
+def _identity(address: str, timeout: float):
+    """The dask ``identity`` of ``address``, asked from a thread with its own event loop (the
+    caller may run inside one, e.g. Jupyter); TimeoutError after ``timeout`` seconds."""
+    import asyncio
+    import threading
+
+    from distributed.core import rpc
+
+    out: dict = {}
+
+    async def ask():
+        r = rpc(address, timeout=timeout)
+        try:
+            return await asyncio.wait_for(r.identity(), timeout)
+        finally:
+            await r.close_rpc()
+
+    def run():
+        try:
+            out["answer"] = asyncio.run(ask())
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller
+            out["error"] = exc
+
+    t = threading.Thread(target=run, name="homtex-scheduler-probe", daemon=True)
+    t.start()
+    t.join(timeout + 2.0)
+    if "error" in out:
+        if isinstance(out["error"], (TimeoutError, asyncio.TimeoutError)):
+            raise TimeoutError(f"no answer from a dask scheduler within {timeout:g} s")
+        raise out["error"]
+    if "answer" not in out:
+        raise TimeoutError(f"no answer from a dask scheduler within {timeout:g} s")
+    return out["answer"]
 
 
 def _executor(scheduler, workers, n_todo, task: str, timeout: float):
@@ -455,13 +516,9 @@ def run_study(path, out_dir, *, scheduler=None, workers: int | None = None, prog
     n_kept = study.n_points - len(todo)
     if max_points is not None:
         todo = todo[:max(int(max_points), 0)]
+    ex = _executor(scheduler, workers, len(todo), study.task, float(connect_timeout)) if todo else None
     bar = _Progress(study.n_points, n_kept, study.name, progress)
-    if todo:
-        try:
-            ex = _executor(scheduler, workers, len(todo), study.task, float(connect_timeout))
-        except BaseException:
-            bar.close()
-            raise
+    if ex is not None:
         if isinstance(ex, _Pool):  # share the cores between the worker processes
             per = max(1, (os.cpu_count() or 1) // ex.n_workers)
             todo = [{**j, "threads": per} for j in todo]
