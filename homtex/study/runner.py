@@ -544,7 +544,7 @@ def run_study(path, out_dir, *, scheduler=None, workers: int | None = None, prog
     if ds.attrs["complete"]:
         try:
             write_netcdf(ds, out / "result.nc")
-        except OSError as exc:
+        except Exception as exc:  # noqa: BLE001 - the points wrote fine: the folder or disk failed
             raise StudyError(f"{_output_error(out, exc)}; all {study.n_points} points are finished and kept in "
                              f"{out / 'points'}; run the study again to write result.nc") from None
     if ds.attrs["points_failed"]:
