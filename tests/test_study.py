@@ -15,7 +15,7 @@ import xarray as xr
 from homtex.errors import InputError
 from homtex.output.datasets import check_meta
 from homtex.output.io import read_netcdf
-from homtex.study import StudyError, load_study, run_study
+from homtex.study import TASKS, StudyError, analytic_task, load_study, register_task, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -122,6 +122,10 @@ def test_dask_local_cluster(tmp_path):
         # the address path (a Client made by the runner) resumes the same folder
         (tmp_path / "b" / "points" / "00004.nc").unlink()
         ds2 = run_study(p, tmp_path / "b", scheduler=cluster.scheduler_address, progress=False)
+        # a worker's address is not mistaken for the scheduler's
+        worker = next(iter(client.scheduler_info()["workers"]))
+        with pytest.raises(StudyError, match=r"answers as a dask Worker, not as the scheduler"):
+            run_study(p, tmp_path / "c", scheduler=worker, progress=False)
     xr.testing.assert_identical(ds, serial)
     xr.testing.assert_identical(ds2, serial)
 
@@ -199,6 +203,15 @@ def test_homogenize_task_on_square_cell_scales_with_E(tmp_path):
     E = ds["yarns.strut.E"].values
     np.testing.assert_allclose(c11.values, E[:, None] * np.pi * r[None, :] ** 2, rtol=1e-6)
     assert ds.attrs["cell.name"] == "square" and check_meta(ds) == []
+    # the task's units survive combining (C of a 2-D cell in N/mm, not "1"), and the Voigt
+    # labels of the homogenize task are described coordinates
+    assert C.attrs["units"] == "N/mm" and ds["C_full"].attrs["units"] == "N/mm"
+    assert ds["yarns.strut.E"].attrs["units"] == "MPa" and ds["yarns.strut.radius"].attrs["units"] == "mm"
+    for c in ("row", "col", "case", "row_full", "col_full"):
+        assert ds[c].attrs["units"] == "1" and "Voigt component" in ds[c].attrs["long_name"], c
+    on_disk = read_netcdf(tmp_path / "out" / "result.nc")
+    for c in ("row", "col", "case", "row_full", "col_full", "C"):
+        assert on_disk[c].attrs == ds[c].attrs
 
 
 def test_process_pool_after_a_computation_in_the_parent(tmp_path):
@@ -253,11 +266,29 @@ def test_macro_study_with_curve_file(tmp_path):
     np.testing.assert_allclose(ds.force.values, 40.0 * ds.strain.values * 12100.0 * 1e-3, rtol=1e-12)
 
 
+def declare_tasks(tmp_path, monkeypatch, module: str, source: str, tasks: dict) -> Path:
+    """An installed package, as far as importlib.metadata sees it: ``module`` (``source``) and a
+    dist-info whose entry_points.txt declares ``tasks`` {name: "module:function"} in the group
+    ``homtex.tasks``; on sys.path here and on PYTHONPATH for worker processes."""
+    site = tmp_path / "site"
+    site.mkdir(exist_ok=True)
+    (site / f"{module}.py").write_text(textwrap.dedent(source))
+    info = site / f"{module}-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {module}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[homtex.tasks]\n" + "".join(f"{k} = {v}\n" for k, v in tasks.items()))
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    return site
+
+
 def test_a_dead_worker_is_a_clear_error_and_finished_points_stay(tmp_path, monkeypatch):
     """A worker killed outside Python (here: os._exit, as the OOM killer would) cannot be
     attributed to a point: the study stops with a StudyError that says how many points are kept,
-    and a rerun without the crash resumes to the uninterrupted result."""
-    (tmp_path / "crashy.py").write_text(textwrap.dedent("""
+    and a rerun without the crash resumes to the uninterrupted result. The task is one an
+    installed package declares through the ``homtex.tasks`` entry point group: the spawned pool
+    workers find it too."""
+    declare_tasks(tmp_path, monkeypatch, "crashy_tasks", """
         import os
         from homtex.study import analytic_task
 
@@ -265,11 +296,9 @@ def test_a_dead_worker_is_a_clear_error_and_finished_points_stay(tmp_path, monke
             if x > 2.5 and os.environ.get("HOMTEX_TEST_CRASH"):
                 os._exit(9)
             return analytic_task(cell, x=x, y=y, **kw)
-    """))
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setenv("PYTHONPATH", str(tmp_path) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    """, {"crashy": "crashy_tasks:task"})
     monkeypatch.setenv("HOMTEX_TEST_CRASH", "1")
-    p = write(tmp_path, GRID.format(sleep=0.0).replace('task = "analytic"', 'task = "crashy:task"')
+    p = write(tmp_path, GRID.format(sleep=0.0).replace('task = "analytic"', 'task = "crashy"')
               .replace("fail_above = 2.5\n", ""))
     with pytest.raises(StudyError, match=r"worker process died.*points are finished and kept"):
         run_study(p, tmp_path / "out", workers=2, progress=False)
@@ -282,18 +311,17 @@ def test_a_dead_worker_is_a_clear_error_and_finished_points_stay(tmp_path, monke
 
 def test_a_warning_of_a_point_result_is_kept(tmp_path, monkeypatch):
     """A point whose result carries a warning (attrs "check", e.g. a compression curve whose
-    force drops) keeps it in the study's ``check`` variable; the others read ''."""
-    (tmp_path / "warny.py").write_text(textwrap.dedent("""
-        from homtex.study import analytic_task
+    force drops) keeps it in the study's ``check`` variable; the others read ''. (The task is
+    registered in this process: it runs with workers=1.)"""
+    def warny(cell=None, *, x=0.0, y=0.0, **kw):
+        ds = analytic_task(cell, x=x, y=y, **kw)
+        if x > 1.5:
+            ds.attrs["check"] = f"force drop at x = {x:g}"
+        return ds
 
-        def task(cell=None, *, x=0.0, y=0.0, **kw):
-            ds = analytic_task(cell, x=x, y=y, **kw)
-            if x > 1.5:
-                ds.attrs["check"] = f"force drop at x = {x:g}"
-            return ds
-    """))
-    monkeypatch.syspath_prepend(str(tmp_path))
-    p = write(tmp_path, GRID.format(sleep=0.0).replace('task = "analytic"', 'task = "warny:task"')
+    monkeypatch.setitem(TASKS, "warny", None)   # undone after the test
+    register_task("warny")(warny)
+    p = write(tmp_path, GRID.format(sleep=0.0).replace('task = "analytic"', 'task = "warny"')
               .replace("fail_above = 2.5\n", ""))
     ds = run_study(p, tmp_path / "out", workers=1, progress=False)
     assert (ds.status.values == 0).all()

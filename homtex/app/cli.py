@@ -88,9 +88,27 @@ def cmd_macro(args) -> None:
 
 
 def cmd_study(args) -> None:
-    ds = run_study(args.study, args.out, scheduler=args.scheduler)
+    """Run or resume a study. Exit status: 0 all points ok; 1 some points failed (result.nc is
+    still written, with ``status``/``error`` per point; a rerun retries them unless
+    --keep-failed); 2 bad input (study file, output folder, scheduler), via main()."""
+    from ..study import summarize
+
+    ds = run_study(args.study, args.out, scheduler=args.scheduler, workers=args.workers,
+                   keep_failed=args.keep_failed, connect_timeout=args.connect_timeout)
     _say(str(ds))
-    _say(f"  wrote {Path(args.out) / 'result.nc'}")
+    result = Path(args.out) / "result.nc"
+    n_failed = int(ds.attrs["points_failed"])
+    if ds.attrs["complete"]:
+        note = (f" (the {n_failed} failed points are NaN there; 'status' and 'error' say which and why)"
+                if n_failed else "")
+        _say(f"  wrote {result}{note}")
+    else:
+        _say(f"  {result} not written: the study is not complete")
+    if n_failed or not ds.attrs["complete"]:
+        print(f"homtex study: error: {summarize(ds)}"
+              + ("; run the same command again to retry the failed points" if n_failed and not args.keep_failed
+                 else ""), file=sys.stderr)
+        raise SystemExit(1)
 
 
 def cmd_plot(args) -> None:
@@ -150,10 +168,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out")
     s.set_defaults(func=cmd_macro)
 
-    s = sub.add_parser("study", help="run a parameter study (resumable)")
-    s.add_argument("study")
-    s.add_argument("--out", required=True)
-    s.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+    s = sub.add_parser("study", help="run a parameter study (resumable)",
+                       description="Run or resume a parameter study. Exit status 0: all points ok; 1: points "
+                       "failed (result.nc is written with status and error per point; a rerun retries them); "
+                       "2: bad input (study file, output folder, scheduler).")
+    s.add_argument("study", help="study file (.toml)")
+    s.add_argument("--out", required=True, help="output folder (created if missing; holds points/ and result.nc)")
+    s.add_argument("--scheduler", default=None, help="dask.distributed scheduler address (tcp://host:8786)")
+    s.add_argument("--connect-timeout", type=float, default=5.0, metavar="SECONDS",
+                   help="seconds to wait for the scheduler to answer (default 5)")
+    s.add_argument("--workers", type=int, default=None,
+                   help="local worker processes (default: one per core; 1 runs in this process)")
+    s.add_argument("--keep-failed", action="store_true",
+                   help="keep the recorded errors of points that failed in an earlier run (default: retry them)")
     s.set_defaults(func=cmd_study)
 
     s = sub.add_parser("plot", help="chart of a homtex netCDF file")

@@ -50,6 +50,11 @@ def combine_points(study: Study, points: list):
                  for p, s in zip(points, status)]
         ds = xr.concat(parts, dim="sample", data_vars="all", coords="minimal", compat="override",
                        join="outer", combine_attrs="drop", fill_value=np.nan)
+        # combine_attrs="drop" empties the variables' attrs too: the units and long names of
+        # the task's variables and coordinates come back from the first finished point
+        for name in [*ds.data_vars, *ds.coords]:
+            if name in ok[0].variables:
+                ds[name].attrs = dict(ok[0][name].attrs)
     else:
         ds = xr.Dataset()
     ds = ds.assign(status=("sample", status), error=("sample", errors), check=("sample", checks))

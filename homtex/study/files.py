@@ -5,7 +5,7 @@ A study file::
     [study]
     name = "square_stiffness"
     cell = "../cells/square.toml"      # relative to the study file (optional for cell-free tasks)
-    task = "homogenize"                # compress | seam | homogenize | macro | analytic
+    task = "homogenize"                # compress | seam | homogenize | macro | analytic | a declared task
     description = "..."                # optional
 
     [options]                          # fixed keyword options of the task
@@ -23,13 +23,16 @@ A study file::
     [sampling.bounds]
     "yarns.strut.radius" = [0.03, 0.06]
 
-    [units]                            # optional: units of the parameters (else guessed from the key)
+    [units]                            # optional: units of the parameters (else guessed from
+                                       # the key: PARAMETER_UNITS, e.g. radius mm, E MPa)
     "yarns.strut.E" = "MPa"
 
 Parameter names that start with a cell table (``cell``, ``parameters``, ``yarns``,
 ``resolution``) change the cell through :meth:`homtex.Cell.replace` (dotted keys); all other
 names are keyword options of the task. String options whose name ends in ``_file`` are
-paths relative to the study file.
+input files, relative to the study file; a missing one is a StudyError when the study is
+loaded (not a failure of every point). The task is a registered name
+(:mod:`homtex.study.tasks`), never an import path: a study file is data.
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ try:
 except ModuleNotFoundError:  # pragma: no cover - python 3.10
     import tomli as tomllib  # type: ignore
 
-__all__ = ["Study", "base_cell", "load_study", "sample_points"]
+__all__ = ["PARAMETER_UNITS", "Study", "base_cell", "guess_unit", "load_study", "sample_points"]
 
 
 @lru_cache(maxsize=4)
@@ -62,9 +65,30 @@ def base_cell(path: str):
     return load_cell(path)
 
 
-_UNIT_GUESS = {"E": "MPa", "G": "MPa", "nu": "1", "radius": "mm", "contact_radius": "mm", "a": "mm",
-               "thickness": "mm", "seam_distance": "mm", "height_scatter": "mm", "strain": "1",
-               "stitch_length": "mm", "prestrain": "1", "eps0": "1", "tol": "1"}
+#: Units of study parameters guessed from the last part of their name (after the last dot) when
+#: the study file's [units] table does not give them; the first matching rule wins. ``names``:
+#: whole names; ``words``: words of a snake_case name ("seam_distance" has "distance").
+#: Options the study does not vary keep their own units in the task's Dataset.
+PARAMETER_UNITS = (
+    {"unit": "MPa", "names": ("E", "G"), "words": ("modulus",)},
+    {"unit": "1", "names": ("nu", "eps0", "tol", "seed", "steps", "n"), "words": ("strain", "prestrain", "ratio",
+                                                                                   "fraction", "count")},
+    {"unit": "N", "names": (), "words": ("force",)},
+    {"unit": "kPa", "names": (), "words": ("stress", "pressure")},
+    {"unit": "mm", "names": ("a", "b", "h", "d"),
+     "words": ("radius", "semi_axes", "thickness", "gap", "distance", "length", "height", "scatter", "travel",
+               "diameter", "width", "spacing", "pitch", "displacement", "offset")},
+)
+
+
+def guess_unit(name: str) -> str:
+    """The unit of a study parameter from its name (:data:`PARAMETER_UNITS`); "1" if none fits."""
+    last = str(name).split(".")[-1]
+    padded = f"_{last.lower()}_"
+    for rule in PARAMETER_UNITS:
+        if last in rule["names"] or any(f"_{w}_" in padded for w in rule["words"]):
+            return rule["unit"]
+    return "1"
 
 
 class Study:
@@ -96,11 +120,25 @@ class Study:
                     raise StudyError(f"cell file {str(cp)!r} does not exist", table="study", key="cell")
                 self.cell_path = str(cp.resolve())
             get_task(self.task)
+            for table in ("options", "parameters", "sampling"):
+                if table in data and not isinstance(data[table], dict):
+                    raise StudyError(f"must be a table, got {data[table]!r}", table=table)
             self.options = dict(data.get("options", {}))
-            for k, v in self.options.items():  # file options are relative to the study file
-                if k.endswith("_file") and isinstance(v, str) and not Path(v).is_absolute():
-                    self.options[k] = str(((Path(path).parent if path is not None else Path.cwd()) / v).resolve())
-            self.units = {str(k): str(v) for k, v in data.get("units", {}).items()}
+            for k, v in self.options.items():  # file options: inputs relative to the study file
+                if k.endswith("_file") and isinstance(v, str):
+                    fp = Path(v) if Path(v).is_absolute() else (Path(path).parent if path is not None
+                                                                else Path.cwd()) / v
+                    if not fp.is_file():  # checked here: not once per point, as a failure of every point
+                        raise StudyError(f"input file {str(fp)!r} does not exist" if not fp.exists() else
+                                         f"input {str(fp)!r} is not a file", table="options", key=k)
+                    self.options[k] = str(fp.resolve())
+            units = data.get("units", {})
+            if not isinstance(units, dict):
+                raise StudyError(f"must be a table of {{parameter = \"unit\"}}, got {units!r}", table="units")
+            for k, v in units.items():
+                if not isinstance(v, str) or not v.strip():
+                    raise StudyError(f"must be a unit string such as \"mm\", got {v!r}", table="units", key=k)
+            self.units = {str(k): v for k, v in units.items()}
             grid = data.get("parameters")
             sampling = data.get("sampling")
             if grid is not None and sampling is not None:
@@ -130,6 +168,9 @@ class Study:
                 self.grid = {}
                 self.points = [{k: float(values[i, j]) for j, k in enumerate(self.names)}
                                for i in range(len(values))]
+            for k in self.units:
+                if k not in self.names:
+                    raise StudyError(f"not a parameter of the study (parameters: {self.names})", table="units", key=k)
             for k in self.names:
                 if k in self.options:
                     raise StudyError(f"parameter {k!r} is also a fixed option", table="options", key=k)
@@ -156,7 +197,12 @@ class Study:
         return job
 
     def unit(self, name: str) -> str:
-        return self.units.get(name, _UNIT_GUESS.get(name.split(".")[-1], "1"))
+        """Unit of parameter ``name``: the study file's [units] table, else :func:`guess_unit`."""
+        if name in self.units:
+            return self.units[name]
+        if any(isinstance(v, str) for v in self.grid.get(name, ())):
+            return "1"   # labels (e.g. method = ["yarn", "foundation"]) have no unit
+        return guess_unit(name)
 
 
 def _str(d, key, table):
@@ -223,10 +269,16 @@ def sample_points(sampling: dict) -> tuple[list, np.ndarray]:
 def load_study(path) -> Study:
     """Read and validate a study file (StudyError names file, table and key)."""
     p = Path(path)
+    if p.is_dir():
+        raise StudyError("is a folder, not a study file; give the study's .toml file", file=path)
     try:
         data = tomllib.loads(p.read_bytes().decode("utf-8"))
     except FileNotFoundError:
         raise StudyError("no such file", file=path) from None
+    except OSError as exc:
+        raise StudyError(f"cannot be read: {exc.strerror or exc}", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise StudyError(f"is not UTF-8 text (a TOML study file): {exc}", file=path) from None
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(f"not valid TOML: {exc}", file=path) from None
     return Study(data, p)

@@ -1,14 +1,31 @@
 """Study tasks: what a study point runs, ``task(cell, **options) -> xarray.Dataset``.
 
-Built-in tasks are registered here under their names (``compress``, ``seam``, ``homogenize``,
-``macro``, ``analytic``).
+A study file names its task by a registered name, never by an import path: study and cell
+files are data, and a file received from someone else must not be able to call arbitrary
+code (``task = "json:dumps"`` is an InputError). The names come from a registry:
+
+- the built-in tasks ``compress``, ``seam``, ``homogenize``, ``macro`` and ``analytic``;
+- tasks that an installed package declares in the entry point group ``homtex.tasks``
+  (:data:`ENTRY_POINT_GROUP`), e.g. in its ``pyproject.toml``::
+
+      [project.entry-points."homtex.tasks"]
+      my_task = "my_package.tasks:my_task"
+
+  Pool and dask workers are fresh interpreters; they find such a task through the package's
+  metadata, like the parent process. Installing a package already runs its code, so naming
+  one of its declared tasks adds nothing a study file could not do anyway.
+- tasks registered in this process with :func:`register_task` (scripts, notebooks). Worker
+  processes do not see them, so a study with such a task runs with ``workers=1`` only
+  (:func:`homtex.run_study` says so otherwise).
+
+A built-in name wins over an entry point of the same name.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from importlib import import_module
+from importlib import metadata
 from typing import Callable
 
 import numpy as np
@@ -22,38 +39,89 @@ from ..macro import macro_curve
 from ..output.io import read_netcdf
 from ..seams import seam_profile
 
-__all__ = ["TASKS", "analytic_task", "compress_task", "get_task", "homogenize_task", "index_dim", "macro_task",
-           "register_task", "seam_task"]
+__all__ = ["ENTRY_POINT_GROUP", "TASKS", "analytic_task", "compress_task", "get_task", "homogenize_task",
+           "in_process_only", "index_dim", "macro_task", "register_task", "seam_task", "task_names"]
 
-#: task name -> callable(cell, **options) -> xarray.Dataset
+#: entry point group in which installed packages declare study tasks (name = "module:function")
+ENTRY_POINT_GROUP = "homtex.tasks"
+
+#: task name -> callable(cell, **options) -> xarray.Dataset: the built-ins and tasks registered
+#: in this process (entry point tasks are looked up when named, see :func:`get_task`)
 TASKS: dict[str, Callable] = {}
+
+_BUILTIN: frozenset = frozenset()   # set at the end of the module
 
 
 def register_task(name: str):
-    """Decorator: register ``fn(cell, **options) -> xr.Dataset`` under ``name``.
+    """Decorator: register ``fn(cell, **options) -> xr.Dataset`` under ``name`` in this process.
 
-    Worker processes (the local pool and dask) start as fresh interpreters and do not see
-    tasks registered in ``__main__``: register the task in an importable module or name it
-    ``"module:function"``; scripts that call :func:`run_study` need the usual
-    ``if __name__ == "__main__":`` guard.
+    Only this process sees the task: worker processes (the local pool, dask) start as fresh
+    interpreters, so a study with it must run with ``workers=1``. To run a task of your own on
+    workers, declare it in the entry point group ``homtex.tasks`` of an installed package (see
+    the module docstring). A built-in task cannot be replaced (InputError).
     """
+    if not isinstance(name, str) or not name.strip() or ":" in name:
+        raise InputError(f"a task name must be a non-empty string without ':', got {name!r}")
+    if name in _BUILTIN:
+        raise InputError(f"task {name!r} is a built-in task and cannot be replaced; choose another name")
+
     def deco(fn):
         TASKS[name] = fn
         return fn
     return deco
 
 
+def _entry_points() -> dict:
+    """{name: EntryPoint} of the ``homtex.tasks`` group (read from the installed metadata now)."""
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def task_names() -> list:
+    """The names a study file may give as its task (built-in, declared, registered here)."""
+    return sorted({*TASKS, *_entry_points()})
+
+
+def in_process_only(name: str) -> bool:
+    """True for a task registered with :func:`register_task` that no entry point declares
+    (worker processes cannot find it)."""
+    return name in TASKS and name not in _BUILTIN and name not in _entry_points()
+
+
+def _how_to_declare() -> str:
+    return (f"a task of your own is declared by an installed package in the entry point group "
+            f"{ENTRY_POINT_GROUP!r} ([project.entry-points.\"{ENTRY_POINT_GROUP}\"] my_task = "
+            f"\"my_package.module:my_task\" in its pyproject.toml)")
+
+
 def get_task(name: str) -> Callable:
-    """The task callable for a registered name or a ``"module:function"`` path."""
+    """The task callable registered under ``name`` (built-in, entry point or this process).
+
+    Raises StudyError (an InputError) for any other name, including ``"module:function"``
+    import paths: a study file is data and cannot name code to import.
+    """
+    if not isinstance(name, str):
+        raise StudyError(f"must be a task name, got {name!r}", table="study", key="task")
     if name in TASKS:
         return TASKS[name]
-    if ":" in name:
-        mod, _, fn = name.partition(":")
+    eps = _entry_points()   # read now: the import system caches the modules themselves
+    if name in eps:
+        ep = eps[name]
         try:
-            return getattr(import_module(mod), fn)
-        except (ImportError, AttributeError) as exc:
-            raise StudyError(f"task {name!r} cannot be imported: {exc}", table="study", key="task") from exc
-    raise StudyError(f"unknown task {name!r}; choose from {sorted(TASKS)} or give 'module:function'",
+            fn = ep.load()
+        except Exception as exc:  # noqa: BLE001 - any import failure of a declared task
+            raise StudyError(f"task {name!r}, declared as {ep.value!r} in the entry point group "
+                             f"{ENTRY_POINT_GROUP!r}, cannot be loaded: {type(exc).__name__}: {exc}",
+                             table="study", key="task") from None
+        if not callable(fn):
+            raise StudyError(f"task {name!r}, declared as {ep.value!r} in the entry point group "
+                             f"{ENTRY_POINT_GROUP!r}, is not callable", table="study", key="task")
+        return fn
+    names = sorted({*TASKS, *eps})
+    if ":" in name or "." in name:
+        raise StudyError(f"task {name!r} looks like an import path; a study file names a registered task, "
+                         f"not code to import (study files are data). Registered tasks: {names}; "
+                         f"{_how_to_declare()}", table="study", key="task")
+    raise StudyError(f"unknown task {name!r}; registered tasks: {names}; {_how_to_declare()}",
                      table="study", key="task")
 
 
@@ -85,7 +153,16 @@ def analytic_task(cell=None, *, x: float = 0.0, y: float = 0.0, z: float = 0.0, 
 def homogenize_task(cell, *, solver: str = "direct", tol: float | None = None, free=None):
     """Effective stiffness of a periodic cell (``homtex.homogenize``); timings dropped."""
     ds = homogenize(cell.frame, solver=solver, tol=tol, free=free).to_dataset()
-    return ds.drop_vars([v for v in ds.data_vars if "seconds" in str(v)])
+    ds = ds.drop_vars([v for v in ds.data_vars if "seconds" in str(v)])
+    for name, long_name in _VOIGT_LABELS.items():  # the Voigt labels are names, not numbers
+        if name in ds.coords:
+            ds[name].attrs.update({"units": "1", "long_name": long_name})
+    return ds
+
+
+_VOIGT_LABELS = {"row": "Voigt component (row of C)", "col": "Voigt component (column of C)",
+                 "row_full": "Voigt component (row of C_full)", "col_full": "Voigt component (column of C_full)",
+                 "case": "unit load case (Voigt component)"}
 
 
 def index_dim(ds, dim: str, new: str, long_name: str):
@@ -134,3 +211,6 @@ def macro_task(cell, **options):
             options["curve"] = data
     ds = index_dim(macro_curve(cell, **options), "plate_displacement", "step", "plate position index")
     return index_dim(ds, "column_x", "column", "cushion column index")
+
+
+_BUILTIN = frozenset(TASKS)
