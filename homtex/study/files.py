@@ -281,4 +281,6 @@ def load_study(path) -> Study:
         raise StudyError(f"is not UTF-8 text (a TOML study file): {exc}", file=path) from None
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(f"not valid TOML: {exc}", file=path) from None
+    except RecursionError:
+        raise StudyError("not a study file: arrays or tables nested too deeply to read", file=path) from None
     return Study(data, p)
