@@ -32,6 +32,7 @@ other data (e.g. ``"thickness"`` in mm). Builders report bad values with
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 from importlib import import_module
 from pathlib import Path
@@ -208,6 +209,19 @@ class Cell:
     def to_dict(self) -> dict:
         """The cell's data as nested dicts (as read from the file, with replacements)."""
         return copy.deepcopy(self._data)
+
+    def fabric_fingerprint(self) -> str:
+        """A short hash of what the fabric is made of: the generator, its parameters (the seam table
+        left out), the yarn types and the resolution. A calibrated seam parameter records the
+        fingerprint of the cell it was calibrated on, so reusing it on another cell is noticed."""
+        data = copy.deepcopy(self._data)
+        data.pop("cell", None)
+        data.get("parameters", {}).pop("seam", None)
+        for y in data.get("yarns", {}).values():
+            if isinstance(y, dict):
+                y.pop("source", None)
+        data["generator"] = self.generator
+        return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
     def attrs(self) -> dict:
         """Flat {dotted key: str | float | int} of the cell (for xarray/netCDF attributes).

@@ -327,3 +327,25 @@ def test_ramp_refuses_a_thread_that_went_through(cell):
         p = homtex.seam_profile(c, seam_distance=24.0, prestrain=0.7, steps=8)
     assert p.attrs["status"] == "failed"
     assert "bobbin thread slipped through the bottom layer" in p.attrs["status_detail"]
+
+
+def test_a_calibrated_layer_rigidity_reused_on_another_fabric_is_flagged(cell):
+    """The foundation model's layer rigidity is calibrated on the shipped fabric: used there it is
+    silent; on a fabric with other yarns it warns and says so in the profile's check; stored with
+    the new fabric's fingerprint after recalibration it is silent again."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        p = homtex.seam_profile(cell, seam_distance=24.0, method="foundation")
+    assert "check" not in p.attrs
+    other = cell.replace(**{"yarns.monofilament.E": 4000.0})
+    assert other.fabric_fingerprint() != cell.fabric_fingerprint()
+    with pytest.warns(UserWarning, match="calibrated on a fabric with fingerprint"):
+        q = homtex.seam_profile(other, seam_distance=24.0, method="foundation")
+    assert "recalibrate" in q.attrs["check"]
+    mine = other.replace(**{"parameters.seam.layer_rigidity_cell": other.fabric_fingerprint()})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = homtex.seam_profile(mine, seam_distance=24.0, method="foundation")
+    assert "check" not in r.attrs

@@ -31,7 +31,9 @@ docs/seams.md tells how the model was arrived at and what it predicts.
 
 from __future__ import annotations
 
+import logging
 import math
+import warnings
 
 import numpy as np
 import xarray as xr
@@ -43,6 +45,8 @@ from ..contact.options import Contact
 from ..errors import InputError
 from ..model.results import Status
 from ..validate import check_int, check_number
+
+log = logging.getLogger(__name__)
 
 __all__ = ["SLACK_LONG_NAME", "calibrate_layer_rigidity", "fabric_modulus", "foundation_profile", "layer_rigidity",
            "seam_table",
@@ -109,7 +113,8 @@ def calibrate_layer_rigidity(cell, *, seam_distance: float = 24.0, cushion_heigh
     with D (a stiffer layer spreads the stitch pull over the cushion); InputError if the target is
     not reachable within ``bounds``."""
     def resid(logD):
-        c = cell.replace(**{"parameters.seam.layer_rigidity": float(np.exp(logD))})
+        c = cell.replace(**{"parameters.seam.layer_rigidity": float(np.exp(logD)),
+                            "parameters.seam.layer_rigidity_cell": cell.fabric_fingerprint()})
         p = foundation_profile(c, seam_distance=seam_distance, prestrain=prestrain, points=61)
         return float(p.cushion_height) - float(cushion_height)
 
@@ -120,6 +125,25 @@ def calibrate_layer_rigidity(cell, *, seam_distance: float = 24.0, cushion_heigh
                          f"{seam_distance:g} mm is not reachable with D in {bounds} N mm^2 (cushion "
                          f"{r_lo + cushion_height:.3g} .. {r_hi + cushion_height:.3g} mm)")
     return float(np.exp(brentq(resid, lo, hi, xtol=1e-10)))
+
+
+def _reused_calibration(cell, seam) -> str:
+    """'' when the layer rigidity was calibrated on this fabric (or is computed from its yarns), else
+    a warning (also issued) that a calibrated value is reused on another cell."""
+    if "layer_rigidity" not in seam:
+        return ""
+    fp = cell.fabric_fingerprint() if hasattr(cell, "fabric_fingerprint") else ""
+    cal = seam.get("layer_rigidity_cell")
+    if cal is not None and fp and cal == fp:
+        return ""
+    where = f"a fabric with fingerprint {cal}" if cal else "an unrecorded fabric"
+    msg = (f"cell {getattr(cell, 'name', '?')!r}: [parameters.seam] layer_rigidity = {seam['layer_rigidity']:g} N mm^2 "
+           f"was calibrated on {where}, not on this one (fingerprint {fp}): the foundation model's cushion "
+           "heights are not calibrated here; recalibrate with homtex.seams.calibrate_layer_rigidity(cell) on a "
+           "measured cushion height and store it with layer_rigidity_cell = cell.fabric_fingerprint()")
+    warnings.warn(msg, UserWarning, stacklevel=3)
+    log.warning(msg)
+    return msg
 
 
 def stitch_pull(hs: float, *, s: float, H: float, eps0: float, EA: float) -> float:
@@ -186,6 +210,7 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
     Ec = fabric_modulus(cell)
     k = 2.0 * Ec * s / H     # both layers move by w: pile strain 2 w / H
     D = float(seam["layer_rigidity"]) if "layer_rigidity" in seam else layer_rigidity(cell, s)
+    reuse = _reused_calibration(cell, seam)
     beta = (k / (4.0 * D)) ** 0.25
     g0 = float(_green(np.array([0.0]), d, beta, k)[0])
     L_rest = (1.0 - eps0) * (2 * s + 2 * H)
@@ -228,4 +253,6 @@ def foundation_profile(cell, *, seam_distance: float, prestrain: float | None = 
                     status="ok", effective_seam_distance_mm=d,
                     seam_distance_mm=d, stitch_length_mm=s, thickness_mm=H, foundation_modulus_MPa=Ec,
                     layer_rigidity_Nmm2=D, beta_per_mm=beta, stitch_EA_N=EA)
+    if reuse:
+        ds.attrs["check"] = reuse
     return ds
