@@ -250,3 +250,16 @@ def test_deeply_nested_cell_file_is_a_cell_error(tmp_path):
     p.write_text('[cell]\nname = "x"\ngenerator = "square"\n[parameters]\na = ' + "[" * 3000 + "1" + "]" * 3000 + "\n")
     with pytest.raises(homtex.CellError, match="nested too deeply"):
         homtex.load_cell(p)
+
+
+@pytest.mark.parametrize("key, value, match", [("prestain", 0.3, "prestain"), ("prestrain", 1.5, "prestrain"),
+                                               ("stitch_length", "4", "stitch_length"),
+                                               ("yarn", "no_such_yarn", "yarn"), ("leg_elements", 2.5, "leg_elements")])
+def test_seam_table_is_checked_when_the_cell_loads(key, value, match):
+    """A typo or a bad value in [parameters.seam] is named at load time, not silently ignored."""
+    from homtex.cells import Cell
+
+    data = tomllib.loads((Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml").read_text())
+    data["parameters"]["seam"][key] = value
+    with pytest.raises(homtex.CellError, match=match):
+        Cell(data).build()

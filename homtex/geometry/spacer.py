@@ -502,6 +502,29 @@ def _info(plans, bar_list, yarns, frame, elements, yarn, n_yarn_el, T, w, cs, W,
     }
 
 
+#: keys of a spacer cell's [parameters.seam] table (read by homtex.seam_profile and seam_compression)
+SEAM_KEYS = ("stitch_length", "prestrain", "elements_per_mm", "leg_elements", "foundation_prestrain",
+             "layer_rigidity", "layer_rigidity_cell", "yarn")
+
+
+def _check_seam_table(seam: dict, yarns: dict) -> None:
+    """Validate [parameters.seam] when the cell is loaded (the seam models read it later)."""
+    if not seam:
+        return
+    t = "parameters.seam"
+    check_keys(seam, SEAM_KEYS, t)
+    get_number(seam, "stitch_length", t, default=4.0, gt=0, le=100)          # mm
+    get_number(seam, "prestrain", t, default=0.0, ge=0, lt=1)
+    get_number(seam, "elements_per_mm", t, default=1.0, gt=0, le=100)
+    get_int(seam, "leg_elements", t, default=4, ge=1)
+    get_number(seam, "foundation_prestrain", t, default=0.0, ge=0, lt=1)
+    get_number(seam, "layer_rigidity", t, required=False, gt=0, le=1e9)      # N mm^2 per stitch length
+    get_str(seam, "layer_rigidity_cell", t, default="")
+    name = get_str(seam, "yarn", t, default="stitch")
+    if name not in yarns:
+        raise CellError(f"no yarn type {name!r} for the stitch; the file defines {sorted(yarns)}", table=t, key="yarn")
+
+
 def build_cell(parameters: dict, yarns: dict[str, YarnType], resolution: dict) -> tuple[Frame, dict]:
     """Generator entry point for cell files with ``generator = "spacer"``.
 
@@ -535,6 +558,7 @@ def build_cell(parameters: dict, yarns: dict[str, YarnType], resolution: dict) -
         for key in ("lapping", "yarn", "bed", "threading", "system"):
             if key in spec:
                 get_str(spec, key, f"{t}.bars.{name}")
+    _check_seam_table(get_table(p, "seam", t, required=False), yarns)
     shape = get_table(p, "shape", t, required=False)
     for key in shape:
         get_number(shape, key, f"{t}.shape")
