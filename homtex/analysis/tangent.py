@@ -22,7 +22,6 @@ the assembled matrix, refined, and redone with pivoting (SuperLU) when that does
 
 from __future__ import annotations
 
-import contextlib
 import logging
 
 import numpy as np
@@ -31,6 +30,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import SolverError
 from ..fem.corotational_system import scatter_free, sym_upper_matvec
+from ..linalg.solvers import blas_single_thread
 
 try:
     import qdldl as _qdldl
@@ -39,16 +39,9 @@ except Exception:  # pragma: no cover - qdldl is a declared dependency
 
 log = logging.getLogger(__name__)
 
-try:
-    from threadpoolctl import threadpool_limits
-except Exception:  # pragma: no cover
-    threadpool_limits = None
-
-
-def one_blas_thread():
-    """BLAS on one thread for small dense eigenproblems (threads only wait on a shared machine:
-    a 3D roll-up took 5 s instead of 0.2 s with them)."""
-    return threadpool_limits(1, user_api="blas") if threadpool_limits else contextlib.nullcontext()
+# BLAS on one thread for small dense eigenproblems and factors (threads only wait on a shared
+# machine: a 3D roll-up took 5 s instead of 0.2 s with them)
+one_blas_thread = blas_single_thread
 
 
 METHODS = ("ldl", "lu")

@@ -25,7 +25,7 @@ from scipy.sparse.linalg import splu
 
 from ..errors import SolverError
 from .krylov import BlockOperator, _cg_update, _coldot, _p_update, _row_scale
-from .solvers import SolveReport, _blas_single, convergence_error
+from .solvers import SolveReport, blas_single_thread, convergence_error
 
 __all__ = ["BatchedVCycle", "block_pcg", "solve_many"]
 
@@ -285,7 +285,7 @@ def solve_many(lin, B: np.ndarray, *, names=None, vcycle: BatchedVCycle | None =
 def _solve_groups(lin, B, names, vcycle, X, hists, rn, nb):
     """Block PCG over groups of 6 columns of B (k, n); fills X, hists, rn, nb in place."""
     k, n = B.shape
-    with _blas_single():
+    with blas_single_thread():
         V = vcycle if vcycle is not None else BatchedVCycle(lin.ml)
         Aop = BlockOperator(lin.A)
         for g0 in range(0, k, 6):
