@@ -161,6 +161,8 @@ class Frame:
             self.a = per_element(sa[:, 0], m, "semi-axis a (semi_axes[:, 0])", lo=MIN_RADIUS, yarn=y)
             self.b = per_element(sa[:, 1], m, "semi-axis b (semi_axes[:, 1])", lo=MIN_RADIUS, yarn=y)
         else:
+            if radius is None:
+                raise InputError("radius (circular sections) or semi_axes (elliptical sections) is required, mm")
             r = per_element(radius, m, "radius", positive=True, lo=MIN_RADIUS, limit=MAX_COORD, yarn=y)
             self.a, self.b = r, r.copy()
         self.E = per_element(E, m, "E", positive=True, limit=MAX_MODULUS, yarn=y)
