@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["IMAGE_FORMATS", "check_image_path", "heartbeat", "output_folder", "safe_stem", "stem_of"]
+__all__ = ["check_image_path", "heartbeat", "output_folder", "safe_stem", "stem_of"]
 
 log = logging.getLogger("homtex.app")
 
@@ -72,10 +72,6 @@ def _image_formats() -> dict:
     return FigureCanvasBase.get_supported_filetypes()
 
 
-IMAGE_FORMATS = ("png", "pdf", "svg", "jpg", "jpeg", "eps", "ps", "tif", "tiff", "webp", "pgf", "raw", "rgba",
-                 "svgz")
-
-
 def check_image_path(path) -> Path:
     """A chart file to write: its extension a format matplotlib writes, its folder existing and
     writable, and not a folder itself; InputError otherwise."""
@@ -96,22 +92,28 @@ def check_image_path(path) -> Path:
 
 
 @contextmanager
-def heartbeat(what: str, *, every: float = 10.0):
-    """Log "... <what>: N s" every ``every`` seconds while the block runs (a long solve that
-    reports nothing itself still shows it is alive), and its duration at the end."""
+def heartbeat(what: str, *, every: float = 10.0, quiet: float = 1.0):
+    """Log "<what> ..." once the block has run ``quiet`` seconds, then "... <what>: N s" every
+    ``every`` seconds (a long solve that reports nothing itself still shows it is alive), and
+    its duration at the end; a block done within ``quiet`` seconds logs nothing."""
     stop = threading.Event()
     t0 = time.perf_counter()
+    started = threading.Event()
 
     def beat():
+        if stop.wait(quiet):
+            return
+        log.info("  %s ...", what)
+        started.set()
         while not stop.wait(every):
             log.info("    ... %s: %.0f s", what, time.perf_counter() - t0)
 
     th = threading.Thread(target=beat, daemon=True, name="homtex-heartbeat")
-    log.info("  %s ...", what)
     th.start()
     try:
         yield
     finally:
         stop.set()
         th.join()
-    log.info("  %s: done in %.1f s", what, time.perf_counter() - t0)
+    if started.is_set():
+        log.info("  %s: done in %.1f s", what, time.perf_counter() - t0)

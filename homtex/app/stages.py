@@ -137,8 +137,8 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
     bars = ax[1].bar(names, [p.setup_seconds + p.solve_seconds for p in reps])
     _tag(ax[1], "s", "setup + solve time", *bars.patches)
     for i, p in enumerate(reps):
-        ax[1].text(i, p.setup_seconds + p.solve_seconds, f"{p.iterations} iterations",
-                   ha="center", va="bottom")
+        ax[1].text(i, p.setup_seconds + p.solve_seconds, f"{p.iterations} iterations" if p.iterations
+                   else "direct solve", ha="center", va="bottom")
     ax[1].set(xlabel="linear solver", title="octet lattice block: the solvers on the same system (they agree to "
               f"{float(ds['max_difference'].max()):.0e})")
     ax[0].title.set_fontsize(9)
@@ -403,11 +403,13 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
         ref = compress(cell.replace(**{"resolution.elements_per_segment": ref_n}), strain=0.2, steps=4)
     rx, ry = ref.strain.values, ref.stress.values
     for n in ((1, 2, 3) if quick else (1, 2, 3, 4, 6)):
+        log.info("  speed-accuracy: unseamed curve at %d element(s) per segment", n)
         c = cell.replace(**{"resolution.elements_per_segment": n})
         ds, sec = _timed(compress, c, strain=0.2, steps=4)
         rows.append(("A unseamed to 20 %", f"yarn, {n} el/seg", sec, _curve_error(rx, ry, ds.strain.values,
                                                                                    ds.stress.values, 0.2)))
     for gtol in (1e-2, 1e-4):
+        log.info("  speed-accuracy: unseamed curve with contact gap tolerance %g mm", gtol)
         ds, sec = _timed(compress, cell, strain=0.2, steps=4, contact=Contact(gap_tol=gtol))
         rows.append(("A unseamed to 20 %", f"yarn, gap tol {gtol:g} mm", sec,
                      _curve_error(rx, ry, ds.strain.values, ds.stress.values, 0.2)))

@@ -146,7 +146,8 @@ def compression_chart(curve, *, plate_area: float = PLATE_AREA_MM2):
     ax[1].set(xlabel="compression, %", ylabel="strain energy per cell, N mm", yscale="log")
     ax[1].set_title(f"{cell}: energy by yarn system (solid) and mechanism (dotted)", fontsize=9)
     _shade_validity(ax[1], 100 * valid, label=False)
-    ax[1].legend(fontsize=7, ncol=2)
+    if ax[1].get_legend_handles_labels()[0]:
+        ax[1].legend(fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
 
@@ -274,10 +275,10 @@ def _cushion_heights(ax, ds, methods, H0):
     rd = np.array([k for k, _ in ref])
     lo, hi, sim = (np.array([v[i] for _, v in ref]) for i in range(3))
     mid = 0.5 * (lo + hi)
-    eb = ax.errorbar(rd, mid, yerr=[mid - lo, hi - mid], fmt="D", color="k", capsize=4,
+    eb = ax.errorbar(rd - 0.4, mid, yerr=[mid - lo, hi - mid], fmt="D", color="k", capsize=4,
                      label="measured (paper, Table 1; 18 mm: 8-12)")
     _tag(ax, "mm", None, [eb.lines[0], *eb.lines[1], *eb.lines[2]])
-    _tag(ax, "mm", None, ax.plot(rd, sim, "x", ms=9, mew=2, color="tab:red", label="paper's simulation"))
+    _tag(ax, "mm", None, ax.plot(rd + 0.4, sim, "x", ms=9, mew=2, color="tab:red", label="paper's simulation"))
     _tag(ax, "mm", "cushion height", ax.axhline(H0, color="0.5", lw=0.8, ls=":", label=f"without seams ({H0:g} mm)"))
     ax.set(xlabel="seam distance asked for, mm", ylim=(0, H0 + 3))
     ax.legend(fontsize=7, loc="lower right")
@@ -334,7 +335,8 @@ def seamed_chart(ds):
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.6))
     w = ds.plate_displacement.values
     H0 = _thickness(ds)
-    _shade_validity(ax[0], VALIDITY_STRAIN * H0)
+    if w.max() > VALIDITY_STRAIN * H0 + 1e-9:
+        _shade_validity(ax[0], VALIDITY_STRAIN * H0)
     kpa = _units(ds, "stress_yarn", "kPa")
     _tag(ax[0], kpa, "compressive stress", ax[0].plot(w, ds.stress_yarn.values, "o-", ms=3, color="tab:blue",
                                                       label="yarn-level seam cell (reference)"))
@@ -354,10 +356,11 @@ def seamed_chart(ds):
         ax[0].axvline(hit, color="tab:red", lw=0.8, ls=":", label=f"punch meets the stitch ({hit:.2f} mm)")
     err = ds.attrs.get("max_relative_error")
     if err is not None:
-        ax[0].text(0.02, 0.70, f"error = {ERROR_DEFINITION}\n(0 - {VALIDITY_STRAIN * H0:g} mm, 30 %): macro "
-                   f"{100 * float(err):.1f} %, held {100 * float(ds.attrs['max_relative_error_held']):.1f} %, "
-                   f"released {100 * float(ds.attrs['max_relative_error_released']):.1f} %",
-                   transform=ax[0].transAxes, fontsize=7, va="top",
+        ax[0].text(0.98, 0.03, f"error = {ERROR_DEFINITION}\n(0 - {VALIDITY_STRAIN * H0:g} mm = 30 %, the model's "
+                   f"validity range): macro {100 * float(err):.1f} %,\npre-load held "
+                   f"{100 * float(ds.attrs['max_relative_error_held']):.1f} %, released "
+                   f"{100 * float(ds.attrs['max_relative_error_released']):.1f} %",
+                   transform=ax[0].transAxes, fontsize=7, va="bottom", ha="right",
                    bbox=dict(boxstyle="round", fc="w", ec="0.7"))
     ax[0].set(xlabel=f"punch travel from the {H0:g} mm plate distance, mm", xlim=(0, w.max()), ylim=(0, None))
     ax[0].set_title(f"{cell}: seams every {d:g} mm, yarn level against the macro layer", fontsize=9)
@@ -440,6 +443,8 @@ def speed_accuracy_chart(ds, *, floor: float = 1e-6):
             for i, (q, m, s, err) in enumerate(zip(qs, models, t, ds.error.values))]
     table = tab.table(cellText=rows, colLabels=["#", "question", "model", "run time, s", "error, 1"],
                       loc="center", cellLoc="left", colWidths=[0.06, 0.12, 0.52, 0.14, 0.16])
+    for c in table.get_celld().values():
+        c.PAD = 0.03
     table.auto_set_font_size(False)
     table.set_fontsize(7)
     table.scale(1, 1.25)
