@@ -197,11 +197,13 @@ class Parser(argparse.ArgumentParser):
         m = re.search(r"unrecognized arguments: (.*)", message)
         if m:
             hints = []
+            opts = {o.lstrip("-"): o for o in self._options()}
             for word in m.group(1).split():
                 if word.startswith("-"):
-                    near = difflib.get_close_matches(word.split("=")[0], self._options(), n=1, cutoff=0.5)
+                    opt = word.split("=")[0]
+                    near = difflib.get_close_matches(opt.lstrip("-"), list(opts), n=1, cutoff=0.6)
                     if near:
-                        hints.append(f"{word.split('=')[0]}: did you mean {near[0]}?")
+                        hints.append(f"{opt}: did you mean {opts[near[0]]}?")
             if hints:
                 return f"; {' '.join(hints)} (see {self.prog} --help)"
             return f" (see {self.prog} --help)"
@@ -215,7 +217,8 @@ def _add_out(s, default: str) -> None:
 
 
 def build_parser() -> Parser:
-    p = Parser(prog="homtex", description=__doc__.split("\n")[0],
+    p = Parser(prog="homtex", description="homtex: yarn-level mechanics of technical textiles, one command per "
+               "pipeline stage, each writing netCDF + PNG.",
                epilog="CELL is " + CELL_HELP + ". Run 'homtex <command> --help' for a command's arguments.")
     p.add_argument("--version", action="version", version=f"homtex {__version__}")
     p.add_argument("--debug", action="store_true",
@@ -252,8 +255,8 @@ def build_parser() -> Parser:
                        "yarn-yarn and yarn-plate): <cell file stem>_compression.nc/.png.")
     s.add_argument("cell", metavar="CELL", help=CELL_HELP)
     s.add_argument("--strain", type=fraction, default=0.3, metavar="EPS",
-                   help="final compression, plate displacement / thickness, in (0, 1), 1 (default: %(default)s = "
-                        "30 %%, the model's validity range)")
+                   help="final compression = plate displacement / thickness, a fraction in (0, 1) (default: "
+                        "%(default)s, i.e. 30 %%, the model's validity range)")
     s.add_argument("--steps", type=count, default=20, metavar="N",
                    help="load steps, integer >= 1; contact is re-linearised per step, so more steps are more "
                         "accurate (default: %(default)s; the main job uses 50 to 50 %%)")
@@ -268,10 +271,10 @@ def build_parser() -> Parser:
                    help="seam distance, mm, > 0 (required; the yarn-level cell rounds it to whole fabric "
                         "repeats, e.g. 24 -> 25.4 mm)")
     s.add_argument("--prestrain", type=prestrain, default=None, metavar="EPS",
-                   help="stitch-yarn pre-strain in [0, 1), 1 (default: the cell file's value for the method: "
-                        "0.3 yarn, 0.4 foundation for spacer_20mm)")
+                   help="stitch-yarn pre-strain, a fraction in [0, 1) (default: the cell file's value for the "
+                        "method: 0.3 yarn, 0.4 foundation for spacer_20mm)")
     s.add_argument("--method", choices=("yarn", "foundation"), default="yarn",
-                   help="yarn: the yarn-level seam cell (blind, 5-20 s); foundation: the analytical model "
+                   help="yarn: the yarn-level seam cell (blind, seconds to a minute); foundation: the analytical model "
                         "calibrated on d = 24 mm (fast) (default: %(default)s)")
     _add_out(s, "results/seam")
     s.set_defaults(func=cmd_seam)
@@ -291,8 +294,8 @@ def build_parser() -> Parser:
                    help="a stored compression law instead: the .nc file `homtex compress` writes (default: none, "
                         "computed with --steps)")
     s.add_argument("--strain", type=fraction, default=None, metavar="EPS",
-                   help="final punch travel / thickness, in (0, 1), 1 (default: 0.5; with --curve where the curve "
-                        "ends, at most 0.5)")
+                   help="final punch travel / thickness, a fraction in (0, 1) (default: 0.5; with --curve where the "
+                        "curve ends, at most 0.5)")
     s.add_argument("--scatter", type=non_negative, default=0.0, metavar="MM",
                    help="standard deviation of the cushion-to-cushion height, mm, >= 0 (default: %(default)s)")
     s.add_argument("--seed", type=seed, default=0, metavar="N",

@@ -47,6 +47,8 @@ def load(cell_arg):
     """The cell of a command-line CELL argument (a file path or a shipped cell name); a wrong
     name is an InputError that lists the shipped cells and the closest one."""
     text = str(cell_arg)
+    if not text.strip():
+        raise InputError(f"CELL is empty: give a .toml cell file or a shipped cell name ({', '.join(shipped_cells())})")
     p = find_cell(text)
     if p.is_dir():
         raise InputError(f"{text}: is a folder, not a cell file (give a .toml cell file or a shipped cell name: "

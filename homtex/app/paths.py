@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["check_image_path", "heartbeat", "output_folder", "safe_stem", "stem_of"]
+__all__ = ["check_image_path", "heartbeat", "output_folder", "safe_stem", "stem_of", "writable"]
 
 log = logging.getLogger("homtex.app")
 
@@ -38,6 +38,17 @@ def stem_of(cell) -> str:
     return safe_stem(Path(str(path)).stem if path else getattr(cell, "name", "cell"))
 
 
+def writable(folder) -> bool:
+    """Can this process create a file in ``folder``? (tried: os.access says yes to root everywhere)"""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".homtex-write-test.", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(probe)
+    return True
+
+
 def output_folder(path) -> Path:
     """The output folder ``path``, created if needed, after checking that it is a folder and
     writable; InputError (before anything is computed) otherwise."""
@@ -54,12 +65,8 @@ def output_folder(path) -> Path:
         raise InputError(f"--out {out}: cannot create the folder (permission denied)") from None
     except OSError as exc:
         raise InputError(f"--out {out}: cannot create the folder ({exc.strerror or exc})") from None
-    try:
-        fd, probe = tempfile.mkstemp(prefix=".homtex-write-test.", dir=out)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise InputError(f"--out {out}: the folder is not writable ({exc.strerror or exc})") from None
+    if not writable(out):
+        raise InputError(f"--out {out}: the folder is not writable (permission denied or a read-only file system)")
     return out
 
 
@@ -76,18 +83,18 @@ def check_image_path(path) -> Path:
     """A chart file to write: its extension a format matplotlib writes, its folder existing and
     writable, and not a folder itself; InputError otherwise."""
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder; give an image file name such as {p / 'chart.png'}")
     ext = p.suffix.lower().lstrip(".")
     formats = _image_formats()
     if ext not in formats:
         raise InputError(f"{p}: unknown image extension {('.' + ext) if ext else '(none)'}; use one of "
                          f"{', '.join('.' + f for f in sorted(formats))}")
-    if p.is_dir():
-        raise InputError(f"{p}: is a folder; give an image file name such as {p / 'chart.png'}")
     folder = p.parent
     if not folder.is_dir():
         raise InputError(f"{p}: the folder {folder} does not exist")
-    if not os.access(folder, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
-        raise InputError(f"{p}: not writable (permission denied)")
+    if not writable(folder) or (p.exists() and not os.access(p, os.W_OK)):
+        raise InputError(f"{p}: not writable (permission denied or a read-only file system)")
     return p
 
 
