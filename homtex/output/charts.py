@@ -61,7 +61,7 @@ def save(fig, path, *, dpi: int = 110):
 def cell_label(ds) -> str:
     """The cell a Dataset belongs to, for titles: ``cell_name`` (stages), the study's cell or '?'."""
     a = ds.attrs
-    for key in ("cell_name", "cell.cell.name", "cell_cell.name"):
+    for key in ("cell_name", "cell.name", "cell.cell.name", "cell_cell.name"):
         if key in a and str(a[key]):
             return str(a[key])
     return "cell ?"

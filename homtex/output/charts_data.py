@@ -45,8 +45,10 @@ def homogenization_chart(ds):
     fig, ax = plt.subplots(figsize=(6.2, 5.0))
     im = _tag(ax, "1", None, ax.imshow(C.values, cmap="viridis"))
     mid = 0.5 * (np.nanmin(C.values) + np.nanmax(C.values))
+    tiny = 1e-9 * np.nanmax(np.abs(C.values))     # round-off of an exact zero
     for (i, j), v in np.ndenumerate(C.values):
-        ax.text(j, i, f"{v + 0.0:.3g}", ha="center", va="center", fontsize=7, color="k" if v > mid else "w")
+        ax.text(j, i, "0" if abs(v) <= tiny else f"{v + 0.0:.3g}", ha="center", va="center", fontsize=7,
+                color="k" if v > mid else "w")
     rows, cols = (list(map(str, C[d].values)) for d in C.dims)
     ax.set_xticks(range(len(cols)), cols)
     ax.set_yticks(range(len(rows)), rows)
