@@ -132,7 +132,7 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
     ax[0].set_aspect("equal")
     fig.colorbar(lc, ax=ax[0], label="axial force, N")
     ax[0].set(xlabel="x, mm", title=f"octet lattice block {'x'.join(map(str, repeat))}, {f.ndof} DOF, 1 % "
-              "compression: axial force (side view)")
+              "compression:\naxial force (side view)")
     names = list(results)
     bars = ax[1].bar(names, [p.setup_seconds + p.solve_seconds for p in reps])
     _tag(ax[1], "s", "setup + solve time", *bars.patches)
