@@ -30,7 +30,7 @@ def test_run_quick_writes_the_paper_study(tmp_path):
     with xr.open_dataset(tmp_path / "cushions.nc") as ds:
         # the profiles' period is each model's effective seam distance (yarn: whole fabric repeats)
         assert float(ds.seam_distance_yarn.sel(case="d=24")) == pytest.approx(25.4)
-        assert float(ds.cushion_height_paper_simulation.sel(case="d=24")) == 14.33
+        assert float(ds.cushion_height_paper_simulation.sel(paper_distance=24.0)) == 14.33
     with xr.open_dataset(tmp_path / "lattice_demo.nc") as ds:
         assert float(ds["force"]) > 0                      # compression resisted
         assert float(ds["max_difference"].max()) < 1e-7    # amg, direct and cg agree

@@ -250,13 +250,16 @@ def _cushion_dataset(cell, profiles, secs, keys) -> xr.Dataset:
                                        f"{m} model"})
         data[f"seconds_{m}"] = ("case", [secs[m][k] for k in keys], {"units": "s", "long_name": f"run time, {m} model"})
     data["seam_distance"] = ("case", [k[0] for k in keys], {"units": "mm", "long_name": "seam distance asked for"})
-    ref = [PAPER_CUSHIONS_MM.get(k[0]) if k[1] is None else None for k in keys]
-    for i, (name, what) in enumerate((("low", "measured cushion height, lower end (paper, Table 1)"),
-                                      ("high", "measured cushion height, upper end (paper, Table 1)"),
-                                      ("paper_simulation", "cushion height simulated in the paper"))):
-        var = f"cushion_height_measured_{name}" if i < 2 else "cushion_height_paper_simulation"
-        data[var] = ("case", [np.nan if r is None else r[i] for r in ref], {"units": "mm", "long_name": what})
+    ref = sorted(PAPER_CUSHIONS_MM.items())
+    for i, (var, what) in enumerate((("cushion_height_measured_low", "measured cushion height, lower end (paper, "
+                                      "Table 1)"),
+                                     ("cushion_height_measured_high", "measured cushion height, upper end (paper, "
+                                      "Table 1)"),
+                                     ("cushion_height_paper_simulation", "cushion height simulated in the paper"))):
+        data[var] = ("paper_distance", [r[i] for _, r in ref], {"units": "mm", "long_name": what})
     ds = xr.Dataset(data, coords={
+        "paper_distance": ("paper_distance", [d for d, _ in ref],
+                           {"units": "mm", "long_name": "seam distance of the paper's specimens"}),
         "case": [f"d={k[0]:g}" + ("" if k[1] is None else f", eps0={k[1]:g}") for k in keys],
         "xi": ("xi", xi, {"units": "1", "long_name": "position across the seam / effective seam distance "
                           "(0: the seam line, +-0.5: midway between seams)"})})

@@ -271,9 +271,13 @@ def _cushion_heights(ax, ds, methods, H0):
         if (~nominal).any():
             _tag(ax, "mm", None, ax.plot(d[~nominal], h[~nominal], mk, mfc="none", color=c,
                                          label=f"{m} model, eps0 = {e[~nominal][0]:.2g}"))
-    ref = sorted(PAPER_CUSHIONS_MM.items())
-    rd = np.array([k for k, _ in ref])
-    lo, hi, sim = (np.array([v[i] for _, v in ref]) for i in range(3))
+    if "cushion_height_paper_simulation" in ds:     # the paper's data as the Dataset carries them
+        rd = ds.paper_distance.values
+        lo, hi, sim = (ds[f"cushion_height_{k}"].values for k in ("measured_low", "measured_high", "paper_simulation"))
+    else:
+        ref = sorted(PAPER_CUSHIONS_MM.items())
+        rd = np.array([k for k, _ in ref])
+        lo, hi, sim = (np.array([v[i] for _, v in ref]) for i in range(3))
     mid = 0.5 * (lo + hi)
     eb = ax.errorbar(rd - 0.4, mid, yerr=[mid - lo, hi - mid], fmt="D", color="k", capsize=4,
                      label="measured (paper, Table 1; 18 mm: 8-12)")
