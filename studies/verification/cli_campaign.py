@@ -26,6 +26,10 @@ import xarray as xr
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))   # this checkout's homtex, whatever is installed
 ERR, OK = "error", "ok"
+#: a shipped study file (studies/configs/ on newer trees)
+SQUARE = next((p for p in (ROOT / "studies" / "configs" / "square_stiffness.toml",
+                           ROOT / "studies" / "square_stiffness.toml") if p.exists()),
+              ROOT / "studies" / "square_stiffness.toml")
 
 
 def _read_only_folder(tmp: Path) -> Path:
@@ -153,17 +157,17 @@ def invocations(f: dict) -> list:
         ("macro: cell without seam table", ["macro", "square", *cl, "--distance", "24", "--out", out], ERR),
         ("macro: --out read-only", ["macro", "spacer_20mm", *cl, "--out", ro], ERR),
         ("study: missing file", ["study"], ERR),
-        ("study: missing --out", ["study", "studies/square_stiffness.toml"], ERR),
+        ("study: missing --out", ["study", SQUARE], ERR),
         ("study: a folder as study file", ["study", d, "--out", out], ERR),
         ("study: no such file", ["study", t / "missing.toml", "--out", out], ERR),
         ("study: a text file", ["study", x, "--out", out], ERR),
         ("study: malformed TOML", ["study", t / "bad_study.toml", "--out", out], ERR),
         ("study: its cell missing", ["study", t / "study_missing_cell.toml", "--out", out], ERR),
-        ("study: --out is a file", ["study", ROOT / "studies" / "square_stiffness.toml", "--out", x], ERR),
-        ("study: --out read-only", ["study", ROOT / "studies" / "square_stiffness.toml", "--out", ro], ERR),
-        ("study: unreachable scheduler", ["study", ROOT / "studies" / "square_stiffness.toml", "--out", t / "st1",
+        ("study: --out is a file", ["study", SQUARE, "--out", x], ERR),
+        ("study: --out read-only", ["study", SQUARE, "--out", ro], ERR),
+        ("study: unreachable scheduler", ["study", SQUARE, "--out", t / "st1",
                                           "--scheduler", "tcp://127.0.0.1:9"], ERR),
-        ("study: scheduler not an address", ["study", ROOT / "studies" / "square_stiffness.toml", "--out", t / "st2",
+        ("study: scheduler not an address", ["study", SQUARE, "--out", t / "st2",
                                              "--scheduler", "not an address"], ERR),
         ("plot: missing FILE", ["plot"], ERR), ("plot: no such file", ["plot", t / "missing.nc"], ERR),
         ("plot: a text file", ["plot", x], ERR), ("plot: a folder", ["plot", d], ERR),
