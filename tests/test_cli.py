@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +23,14 @@ def test_run_quick_writes_the_paper_study(tmp_path):
                 assert "units" in v.attrs and "long_name" in v.attrs, (name, v.name)
                 if np.issubdtype(v.dtype, np.floating):
                     assert np.isfinite(v.values).all() or name == "macro_curves", (name, v.name)
+            for c in ds.coords.values():
+                assert "units" in c.attrs and "long_name" in c.attrs, (name, c.name)
+            assert ds.attrs["homtex_kind"] and ds.attrs["cell_name"], name
+        assert main(["plot", str(tmp_path / f"{name}.nc"), "--out", str(tmp_path / f"replot_{name}.png")]) == 0
+    with xr.open_dataset(tmp_path / "cushions.nc") as ds:
+        # the profiles' period is each model's effective seam distance (yarn: whole fabric repeats)
+        assert float(ds.seam_distance_yarn.sel(case="d=24")) == pytest.approx(25.4)
+        assert float(ds.cushion_height_paper_simulation.sel(paper_distance=24.0)) == 14.33
     with xr.open_dataset(tmp_path / "lattice_demo.nc") as ds:
         assert float(ds["force"]) > 0                      # compression resisted
         assert float(ds["max_difference"].max()) < 1e-7    # amg, direct and cg agree
@@ -65,8 +74,11 @@ def test_homogenize_command_matches_api_and_plots(tmp_path, capsys):
     cell = "cells/square.toml"
     assert main(["homogenize", cell, "--out", str(tmp_path)]) == 0
     (nc,) = tmp_path.glob("*.nc")
+    assert nc.name == "square_homogenized.nc"
     with xr.open_dataset(nc) as ds:
         C = ds["C"].values
+        for c in ds.coords.values():      # units and long names on the coordinates too
+            assert "units" in c.attrs and "long_name" in c.attrs, c.name
     np.testing.assert_allclose(C, homtex.homogenize(homtex.load_cell(cell).frame).C, rtol=1e-10)
     assert main(["plot", str(nc), "--out", str(tmp_path / "p.png")]) == 0
     assert (tmp_path / "p.png").stat().st_size > 5_000
@@ -82,31 +94,51 @@ def test_malformed_cell_file_names_key(tmp_path):
     assert "bad.toml" in p.stderr and "[parameters]" in p.stderr and "'a'" in p.stderr
 
 
+def _linear_curve(path, modulus=100.0, end=0.5):
+    """A stored compression law (what `homtex compress` writes): stress = modulus x strain, kPa."""
+    from homtex.output.io import write_netcdf
+
+    e = np.linspace(0.0, end, 11)
+    return write_netcdf(xr.Dataset({"stress": ("strain", modulus * e, {"units": "kPa", "long_name": "stress"})},
+                                   coords={"strain": ("strain", e, {"units": "1", "long_name": "strain"})},
+                                   attrs={"thickness_mm": 20.0, "status": "ok"}), path)
+
+
 def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_path):
-    """cell, compress, seam, macro and study from the shell: each writes its files, and what is
-    in them is what the API gives (closed forms where there are any)."""
+    """cell, compress, seam, macro and study from the shell: each writes its files, named after
+    the cell file, and what is in them is what the API gives (closed forms where there are any)."""
     import homtex
 
     spacer = "cells/spacer_20mm.toml"
     assert main(["cell", spacer, "--out", str(tmp_path / "cell")]) == 0
-    assert (tmp_path / "cell" / "spacer_20mm.png").stat().st_size > 10_000
-    assert "thickness: 20.0" in (tmp_path / "cell" / "spacer_20mm.txt").read_text()
+    assert (tmp_path / "cell" / "spacer_20mm_cell.png").stat().st_size > 10_000
+    assert "thickness: 20.0" in (tmp_path / "cell" / "spacer_20mm_cell.txt").read_text()
     meshio = pytest.importorskip("meshio")
-    mesh = meshio.read(tmp_path / "cell" / "spacer_20mm.vtu")
+    mesh = meshio.read(tmp_path / "cell" / "spacer_20mm_cell.vtu")
     assert sum(len(c.data) for c in mesh.cells) == homtex.load_cell(spacer).frame.n_elements
 
     assert main(["compress", spacer, "--strain", "0.1", "--steps", "5", "--out", str(tmp_path / "c")]) == 0
-    with xr.open_dataset(tmp_path / "c" / "unseamed_compression.nc") as ds:
+    stored = tmp_path / "c" / "spacer_20mm_compression.nc"
+    with xr.open_dataset(stored) as ds:
         api = homtex.compress(homtex.load_cell(spacer), strain=0.1, steps=5)
         np.testing.assert_allclose(ds.stress.values, api.stress.values, rtol=1e-8)
-    assert (tmp_path / "c" / "unseamed_compression.png").exists()
+        s, e = ds.stress.values, ds.strain.values
+    assert (tmp_path / "c" / "spacer_20mm_compression.png").exists()
+    # the macro layer on that stored law, no seams: every column under the 121 cm^2 plate is engaged
+    # from the start, so F(w) = 12100 mm^2 x stress(w / 20 mm)
+    assert main(["macro", spacer, "--curve", str(stored), "--out", str(tmp_path / "m0")]) == 0
+    with xr.open_dataset(tmp_path / "m0" / "spacer_20mm_macro_noseam.nc") as ds:
+        w, F = ds.plate_displacement.values, ds.force.values
+        np.testing.assert_allclose(F, 12.1 * np.interp(w / 20.0, np.r_[0.0, e], np.r_[0.0, s]), rtol=1e-6)
+        assert w[-1] == pytest.approx(2.0)    # the stored curve ends at 10 %
 
     assert main(["seam", spacer, "--distance", "24", "--method", "foundation", "--out", str(tmp_path / "s")]) == 0
     with xr.open_dataset(tmp_path / "s" / "spacer_20mm_seam_24mm_foundation.nc") as ds:
         assert float(ds.cushion_height) == pytest.approx(14.33, abs=0.01)   # the calibration point
     assert (tmp_path / "s" / "spacer_20mm_seam_24mm_foundation.png").exists()
 
-    assert main(["macro", spacer, "--distance", "24", "--seam-method", "foundation",
+    law = _linear_curve(tmp_path / "law.nc")
+    assert main(["macro", spacer, "--distance", "24", "--seam-method", "foundation", "--curve", str(law),
                  "--out", str(tmp_path / "m")]) == 0
     with xr.open_dataset(tmp_path / "m" / "spacer_20mm_macro_24mm.nc") as ds:
         w, F = ds.plate_displacement.values, ds.force.values
@@ -123,3 +155,231 @@ def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_pat
         C11 = ds.C.sel(row="11", col="11").values
         np.testing.assert_allclose(C11, E * np.pi * r**2 / a, rtol=1e-6)   # stretch-dominated
         assert ds.attrs["complete"] and int(ds.attrs["points_failed"]) == 0
+    # a grid study is drawn (heat map of a chosen variable), the README's example included
+    assert main(["plot", str(tmp_path / "st" / "result.nc"), "--var", "C", "--sel", "row=11", "--sel", "col=11",
+                 "--out", str(tmp_path / "st" / "C11.png")]) == 0
+    assert main(["plot", str(tmp_path / "st" / "result.nc")]) == 0
+    assert (tmp_path / "st" / "result.png").stat().st_size > 10_000
+
+
+# ------------------------------------------------------------------ user mistakes: a message, never a traceback
+def _homtex(*args):
+    return subprocess.run([sys.executable, "-m", "homtex.app.cli", *map(str, args)], capture_output=True, text=True)
+
+
+def test_an_unknown_option_prints_the_subcommands_usage_and_a_suggestion():
+    p = _homtex("compress", "square", "--stran", "0.2")
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert "usage: homtex compress" in p.stderr                 # the subcommand's usage, not the top level's
+    assert "did you mean --strain" in p.stderr
+    p = _homtex("seam", "spacer_20mm", "--distance", "24", "--method", "yarm")
+    assert p.returncode == 2 and "usage: homtex seam" in p.stderr and "did you mean 'yarn'" in p.stderr
+    p = _homtex("sam")
+    assert p.returncode == 2 and "did you mean 'seam'" in p.stderr
+
+
+def test_a_wrong_cell_name_lists_the_shipped_cells(capsys):
+    assert main(["cell", "spacer_20m"]) == 2
+    err = capsys.readouterr().err
+    assert "spacer_20m:" in err and "did you mean spacer_20mm" in err
+    for name in ("spacer_20mm", "octet", "square", "honeycomb"):
+        assert name in err
+    assert main(["cell", "cells"]) == 2          # a folder
+    assert "is a folder" in capsys.readouterr().err
+
+
+def test_bad_values_are_usage_errors():
+    for args, what in ((("compress", "square", "--strain", "1.5"), "between 0 and 1"),
+                       (("compress", "square", "--steps", "0"), ">= 1"),
+                       (("compress", "square", "--steps", "two"), "not an integer"),
+                       (("seam", "spacer_20mm", "--distance", "-3"), "> 0"),
+                       (("seam", "spacer_20mm", "--distance", "nan"), "not a number"),
+                       (("macro", "spacer_20mm", "--seed", "-1"), ">= 0")):
+        p = _homtex(*args)
+        assert p.returncode == 2 and "Traceback" not in p.stderr and what in p.stderr, (args, p.stderr)
+        assert f"usage: homtex {args[0]}" in p.stderr
+
+
+def _read_only_folder(tmp_path):
+    """A folder this process cannot write to (a 0500 folder; for root, whom permissions do not stop, /sys)."""
+    from homtex.app.paths import writable
+
+    ro = tmp_path / "ro"
+    ro.mkdir(exist_ok=True)
+    ro.chmod(0o500)
+    if not writable(ro):
+        return ro
+    if Path("/sys").is_dir() and not writable(Path("/sys")):
+        return Path("/sys")
+    pytest.skip("no read-only folder for this user here")
+
+
+def test_out_that_is_a_file_or_not_writable_fails_before_computing(tmp_path, capsys, monkeypatch):
+    import homtex.app.commands as commands
+
+    def boom(*a, **k):
+        raise AssertionError("computed before checking --out")
+
+    monkeypatch.setattr(commands, "seam_profile", boom)
+    f = tmp_path / "file.txt"
+    f.write_text("x")
+    for out, what in ((f, "is a file"), (f / "sub", "is a file"), (_read_only_folder(tmp_path), "not writable"),
+                      (_read_only_folder(tmp_path) / "new", "cannot create")):
+        assert main(["seam", "spacer_20mm", "--distance", "24", "--out", str(out)]) == 2, out
+        err = capsys.readouterr().err
+        assert f"--out {out}" in err and what in err, err
+
+
+def test_plot_of_a_non_netcdf_file_or_to_an_unknown_extension_is_a_message(tmp_path, capsys):
+    txt = tmp_path / "notes.txt"
+    txt.write_text("not netCDF\n")
+    assert main(["plot", str(txt)]) == 2
+    assert "not a netCDF file" in capsys.readouterr().err
+    nc = _linear_curve(tmp_path / "law.nc")
+    assert main(["plot", str(nc), "--out", str(tmp_path / "chart.xyz")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown image extension .xyz" in err and ".png" in err
+    assert main(["plot", str(nc), "--out", str(tmp_path)]) == 2          # a folder
+    assert main(["plot", str(tmp_path)]) == 2
+    assert main(["plot", str(tmp_path / "missing.nc")]) == 2
+    assert main(["plot", str(nc), "--out", str(tmp_path / "chart.svg")]) == 0
+    assert (tmp_path / "chart.svg").stat().st_size > 5_000
+
+
+def test_a_cell_name_never_becomes_a_path(tmp_path):
+    """name = "../outside/escaped" or an absolute name: the files go into --out, named after the cell FILE"""
+    import os
+
+    square = Path("cells/square.toml").read_text()
+    outside = tmp_path / "abs_target" / "escaped"
+    for i, name in enumerate(("../outside/escaped", str(outside), "..", "a/../../b")):
+        cell = tmp_path / "cells" / f"evil{i}.toml"
+        cell.parent.mkdir(exist_ok=True)
+        cell.write_text(square.replace('name = "square"', f"name = {name!r}".replace("'", '"')))
+        out = tmp_path / "out" / "here"
+        assert main(["cell", str(cell), "--out", str(out)]) == 0
+        assert main(["homogenize", str(cell), "--out", str(out)]) == 0
+        assert {p.name for p in out.glob(f"evil{i}_*")} >= {f"evil{i}_cell.png", f"evil{i}_cell.txt",
+                                                            f"evil{i}_homogenized.nc", f"evil{i}_homogenized.png"}
+    written = {str(Path(r) / f) for r, _, fs in os.walk(tmp_path) for f in fs}
+    assert all(w.startswith(str(tmp_path / "out" / "here")) or w.startswith(str(tmp_path / "cells"))
+               for w in written), sorted(written)
+    assert not (tmp_path / "out" / "outside").exists() and not outside.parent.exists()
+
+
+def test_safe_stem():
+    from homtex.app.paths import safe_stem
+
+    assert safe_stem("spacer_20mm") == "spacer_20mm"
+    for bad in ("../outside/escaped", "/etc/passwd", "..", "a\\\\b", "x\0y", "", ".hidden"):
+        s = safe_stem(bad)
+        assert s and "/" not in s and "\\\\" not in s and not s.startswith(".") and "\0" not in s, (bad, s)
+
+
+def test_written_files_follow_the_umask(tmp_path):
+    import os
+
+    from homtex.output.io import write_netcdf
+
+    ds = xr.Dataset({"a": ("x", np.arange(3.0), {"units": "1", "long_name": "a"})})
+    old = os.umask(0o022)
+    try:
+        for umask, mode in ((0o022, 0o644), (0o077, 0o600), (0o002, 0o664)):
+            os.umask(umask)
+            p = write_netcdf(ds, tmp_path / f"m{umask:o}.nc")
+            assert p.stat().st_mode & 0o777 == mode, (oct(umask), oct(p.stat().st_mode))
+    finally:
+        os.umask(old)
+
+
+def test_macro_takes_the_step_count_or_a_stored_curve_and_prints_a_summary(tmp_path, capsys, monkeypatch):
+    import homtex.app.commands as commands
+
+    calls = []
+
+    def fake_compress(cell, *, strain, steps, progress=None):
+        calls.append((strain, steps))
+        return xr.open_dataset(_linear_curve(tmp_path / f"fake{len(calls)}.nc", modulus=80.0 + steps, end=strain)
+                               ).load()
+
+    monkeypatch.setattr(commands, "compress", fake_compress)
+    assert main(["macro", "spacer_20mm", "--out", str(tmp_path / "a")]) == 0
+    assert main(["macro", "spacer_20mm", "--steps", "7", "--strain", "0.4", "--out", str(tmp_path / "b")]) == 0
+    assert calls == [(0.5, 50), (0.4, 7)]      # default: 50 steps to 50 % (the main job's converged law)
+    out = capsys.readouterr().out
+    # no seams, stress = k eps: F_max = 12100 mm^2 x k x 0.5 / 1000 = 6.05 k N (k = 130 kPa for 50 steps)
+    assert "max force 786.5 N at 10.00 mm (50 %)" in out
+    assert "force at 30 % (6.0 mm) 471.9 N" in out and "first contact at" in out
+    assert "computed, 7 steps to 40 %" in out
+    with xr.open_dataset(tmp_path / "b" / "spacer_20mm_macro_noseam.nc") as ds:
+        assert ds.force.values[-1] == pytest.approx(12.1 * 87.0 * 0.4)
+    # a stored curve instead of computing one
+    law = _linear_curve(tmp_path / "law.nc", modulus=200.0)
+    assert main(["macro", "spacer_20mm", "--curve", str(law), "--out", str(tmp_path / "c")]) == 0
+    assert len(calls) == 2 and "max force 1210.0 N" in capsys.readouterr().out
+    assert main(["macro", "spacer_20mm", "--curve", str(law), "--steps", "5"]) == 2
+    assert "not both" in capsys.readouterr().err
+    assert main(["macro", "spacer_20mm", "--curve", str(tmp_path / "c" / "spacer_20mm_macro_noseam.png")]) == 2
+    assert "not a compression curve" in capsys.readouterr().err
+
+
+def test_debug_shows_the_traceback_and_an_internal_error_says_so(tmp_path, capsys, monkeypatch):
+    import errno
+
+    import homtex.app.cli as cli
+    from homtex.errors import InputError
+
+    with pytest.raises(InputError):
+        main(["--debug", "cell", "no_such_cell"])
+    with pytest.raises(InputError):
+        main(["cell", "no_such_cell", "--debug"])
+
+    def bug(args):
+        raise ZeroDivisionError("division by zero")
+
+    def full(args):
+        raise OSError(errno.ENOSPC, "No space left on device", "x.nc")
+
+    parser = cli.build_parser()
+    parser.commands["cell"].set_defaults(func=bug)
+    parser.commands["seam"].set_defaults(func=full)
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    capsys.readouterr()
+    assert main(["cell", "square"]) == 3
+    err = capsys.readouterr().err
+    assert "internal error" in err and "--debug" in err and "Traceback" not in err
+    assert main(["seam", "square", "--distance", "3"]) == 2
+    assert "No space left on device: x.nc" in capsys.readouterr().err
+
+
+def test_every_argument_is_documented_with_its_default():
+    from homtex.app.cli import build_parser
+
+    parser = build_parser()
+    for name, sp in parser.commands.items():
+        if name == "study":          # documented by the study engineer
+            continue
+        for a in sp._actions:
+            if a.dest in ("help", "debug"):
+                continue
+            assert a.help, (name, a.dest)
+            text = a.help % {"default": a.default}
+            assert "default" in text or a.required or not a.option_strings, (name, a.dest, text)
+            if a.option_strings and a.type is not None and a.dest not in ("seed", "steps", "sel"):
+                assert any(u in text for u in ("mm", "fraction", "%")), (name, a.dest, text)
+
+
+def test_heartbeat_reports_a_long_block(caplog):
+    import logging
+    import time
+
+    from homtex.app.paths import heartbeat
+
+    with caplog.at_level(logging.INFO, logger="homtex"):
+        with heartbeat("quick thing", every=0.05, quiet=0.5):
+            pass
+        with heartbeat("long thing", every=0.05, quiet=0.02):
+            time.sleep(0.3)
+    msgs = [r.getMessage() for r in caplog.records]
+    assert not any("quick thing" in m for m in msgs)
+    assert sum("... long thing" in m for m in msgs) >= 3 and any("long thing: done" in m for m in msgs)

@@ -1,39 +1,46 @@
 """The ``homtex`` command: one subcommand per pipeline stage, each writing netCDF + PNG.
 
-    homtex run      [--out DIR]                 the main job (README's first command)
+    homtex run      [--out DIR] [--quick]       the main job (README's first command)
     homtex cell     CELL [--out DIR]            summary and picture of a unit cell
-    homtex homogenize CELL [--out DIR]          effective stiffness of a periodic cell
+    homtex homogenize CELL [--solver S] [--out DIR]   effective stiffness of a periodic cell
     homtex compress CELL [--strain 0.3] [--steps 20] [--out DIR]
-    homtex seam     CELL --distance D [--prestrain EPS] [--out DIR]
-    homtex macro    CELL [--distance D] [--scatter S] [--pre-stress LAW] [--slack-travel MM] [--out DIR]
+    homtex seam     CELL --distance D [--prestrain EPS] [--method yarn|foundation] [--out DIR]
+    homtex macro    CELL [--distance D] [--steps 50 | --curve FILE.nc] [--strain 0.5] [--scatter S] ...
     homtex study    STUDY.toml --out DIR [--scheduler ADDRESS]
-    homtex plot     FILE.nc [--out PNG]
+    homtex plot     FILE.nc [--out IMAGE] [--var NAME] [--sel DIM=VALUE]
 
-Errors from bad input (InputError) and failed solves (SolverError) are printed as one clear
-message and a non-zero exit status, never as a traceback.
+CELL is a cell file path (.toml) or a shipped cell name (spacer_20mm, octet, ...).
+A user's mistake (a bad option, file, folder or value) is one line ``homtex <cmd>: error: ...``
+and exit status 2, never a traceback; ``homtex --debug ...`` shows the traceback. Anything
+else is an internal error (exit status 3): run it again with --debug and report it.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import logging
+import math
+import re
 import sys
 import time
 from pathlib import Path
 
 from .._version import __version__
 from ..errors import InputError, SolverError
-from ..study import run_study
+from ..study import run_study, summarize
 from .commands import cell_summary, compress_cell, homogenize_cell, macro_cell, plot_file, seam_cell
 from .main_job import main_job
+from .paths import output_folder
 
 log = logging.getLogger("homtex")
 
+CELL_HELP = ("a cell file path (.toml) or a shipped cell name (spacer_20mm, octet, square, honeycomb, ...; "
+             "a wrong name lists them all)")
+
 
 def _out(args, default: str) -> Path:
-    out = Path(args.out or default)
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    return output_folder(args.out or default)
 
 
 def _say(msg: str) -> None:
@@ -72,17 +79,22 @@ def cmd_seam(args) -> None:
     ds, paths = seam_cell(args.cell, _out(args, "results/seam"), seam_distance=args.distance,
                           prestrain=args.prestrain, method=args.method)
     _say(f"cushion height {float(ds['cushion_height']):.2f} mm, seam line {float(ds['seam_height']):.2f} mm "
-         f"({ds.attrs['method']} model, eps0 = {float(ds['prestrain']):.3g}, status {ds.attrs.get('status', 'ok')})")
+         f"({ds.attrs['method']} model, eps0 = {float(ds['prestrain']):.3g}, seams every "
+         f"{float(ds.attrs.get('effective_seam_distance_mm', args.distance)):.4g} mm, "
+         f"status {ds.attrs.get('status', 'ok')})")
     _say(f"  note: {ds.attrs['validity']}")
     for p in paths:
         _say(f"  wrote {p}")
 
 
 def cmd_macro(args) -> None:
-    ds, paths = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
-                           height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
-                           slack_travel=args.slack_travel, seam_method=args.seam_method)
-    _say(str(ds))
+    if args.curve is not None and args.steps is not None:
+        raise InputError("give either --steps (compute the compression law) or --curve (a stored one), not both")
+    ds, paths, line = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
+                                 height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
+                                 slack_travel=args.slack_travel, seam_method=args.seam_method,
+                                 steps=50 if args.steps is None else args.steps, strain=args.strain,
+                                 curve=args.curve)
     for p in paths:
         _say(f"  wrote {p}")
 
@@ -91,8 +103,6 @@ def cmd_study(args) -> None:
     """Run or resume a study. Exit status: 0 all points ok; 1 some points failed (result.nc is
     still written, with ``status``/``error`` per point; a rerun retries them unless
     --keep-failed); 2 bad input (study file, output folder, scheduler), via main()."""
-    from ..study import summarize
-
     ds = run_study(args.study, args.out, scheduler=args.scheduler, workers=args.workers,
                    keep_failed=args.keep_failed, connect_timeout=args.connect_timeout)
     _say(str(ds))
@@ -112,60 +122,210 @@ def cmd_study(args) -> None:
 
 
 def cmd_plot(args) -> None:
-    _say(f"  wrote {plot_file(args.file, args.out)}")
+    _say(f"  wrote {plot_file(args.file, args.out, var=args.var, sel=args.sel)}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="homtex", description=__doc__.split("\n")[0])
+# ----------------------------------------------------------------------------- argument types
+def _number(text, kind=float):
+    try:
+        v = kind(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+    if kind is float and math.isnan(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number")
+    return v
+
+
+def positive(text):
+    """a number > 0 (finite)"""
+    v = _number(text)
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return v
+
+
+def non_negative(text):
+    """a number >= 0 (finite)"""
+    v = _number(text)
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return v
+
+
+def length_or_inf(text):
+    """a length >= 0, mm, or inf"""
+    v = _number(text)
+    if not v >= 0:
+        raise argparse.ArgumentTypeError(f"must be a length >= 0 (mm) or inf, got {text!r}")
+    return v
+
+
+def fraction(text):
+    """a number in (0, 1)"""
+    v = _number(text)
+    if not 0 < v < 1:
+        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1 (0.3 = 30 %), got {text!r}")
+    return v
+
+
+def prestrain(text):
+    """a number in [0, 1)"""
+    v = _number(text)
+    if not 0 <= v < 1:
+        raise argparse.ArgumentTypeError(f"must lie in [0, 1) (0.3 = 30 %), got {text!r}")
+    return v
+
+
+def count(text):
+    """an integer >= 1"""
+    v = _number(text, int)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return v
+
+
+def seed(text):
+    """an integer >= 0"""
+    v = _number(text, int)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return v
+
+
+# ----------------------------------------------------------------------------- the parser
+class Parser(argparse.ArgumentParser):
+    """argparse with a "did you mean" on a wrong option, choice or subcommand; errors print this
+    (sub)command's own usage and exit with status 2."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(2, f"{self.prog}: error: {message}{self._suggest(message)}\n")
+
+    def _options(self) -> list:
+        return [o for a in self._actions for o in a.option_strings]
+
+    def _suggest(self, message) -> str:
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            choices = re.findall(r"'([^']*)'", m.group(2)) or [c.strip() for c in m.group(2).split(",")]
+            near = difflib.get_close_matches(m.group(1), choices, n=1, cutoff=0.5)
+            return f"; did you mean {near[0]!r}?" if near else ""
+        m = re.search(r"unrecognized arguments: (.*)", message)
+        if m:
+            hints = []
+            opts = {o.lstrip("-"): o for o in self._options()}
+            for word in m.group(1).split():
+                if word.startswith("-"):
+                    opt = word.split("=")[0]
+                    near = difflib.get_close_matches(opt.lstrip("-"), list(opts), n=1, cutoff=0.6)
+                    if near:
+                        hints.append(f"{opt}: did you mean {opts[near[0]]}?")
+            if hints:
+                return f"; {' '.join(hints)} (see {self.prog} --help)"
+            return f" (see {self.prog} --help)"
+        return f" (see {self.prog} --help)" if " " in self.prog else ""
+
+
+def _add_out(s, default: str) -> None:
+    s.add_argument("--out", metavar="DIR", default=None,
+                   help=f"output folder, created if missing; must be a writable folder, not a file "
+                        f"(default: {default})")
+
+
+def build_parser() -> Parser:
+    p = Parser(prog="homtex", description="homtex: yarn-level mechanics of technical textiles, one command per "
+               "pipeline stage, each writing netCDF + PNG.",
+               epilog="CELL is " + CELL_HELP + ". Run 'homtex <command> --help' for a command's arguments.")
     p.add_argument("--version", action="version", version=f"homtex {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
+    p.add_argument("--debug", action="store_true",
+                   help="show the full traceback of an error instead of a one-line message")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=Parser)
 
-    s = sub.add_parser("run", help="the main job: the paper's study end to end")
-    s.add_argument("--out", help="output folder (default results/)")
-    s.add_argument("--quick", action="store_true", help="coarser, faster variant (for smoke tests)")
+    s = sub.add_parser("run", help="the main job: the paper's study end to end (3-5 min)",
+                       description="The main job: lattice demo, spacer cell, unseamed compression, cushion "
+                       "profiles (18, 24, 43 mm), macro curves, yarn level against macro, speed-accuracy; "
+                       "netCDF + PNG per stage and summary.md.")
+    _add_out(s, "results")
+    s.add_argument("--quick", action="store_true",
+                   help="coarser, faster variant for smoke tests (about 2 min; default: off, the full job)")
     s.set_defaults(func=cmd_run)
 
-    s = sub.add_parser("cell", help="summary and picture of a unit cell")
-    s.add_argument("cell")
-    s.add_argument("--out")
+    s = sub.add_parser("cell", help="summary and picture of a unit cell",
+                       description="Summary (text), picture (PNG) and VTK (with meshio) of a cell: "
+                       "<cell file stem>_cell.txt/.png/.vtu.")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP)
+    _add_out(s, "results/cell")
     s.set_defaults(func=cmd_cell)
 
-    s = sub.add_parser("homogenize", help="effective stiffness of a periodic cell")
-    s.add_argument("cell")
-    s.add_argument("--solver", default="amg", choices=["amg", "direct", "cg"])
-    s.add_argument("--out")
+    s = sub.add_parser("homogenize", help="effective stiffness of a periodic cell",
+                       description="Effective stiffness C of a periodic cell and its engineering constants: "
+                       "<cell file stem>_homogenized.nc/.png.")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP)
+    s.add_argument("--solver", default="amg", choices=["amg", "direct", "cg"],
+                   help="linear solver: amg (AMG-preconditioned CG), direct (sparse LU) or cg (default: %(default)s)")
+    _add_out(s, "results/homogenize")
     s.set_defaults(func=cmd_homogenize)
 
-    s = sub.add_parser("compress", help="compression curve of a fabric cell between plates")
-    s.add_argument("cell")
-    s.add_argument("--strain", type=float, default=0.3)
-    s.add_argument("--steps", type=int, default=20)
-    s.add_argument("--out")
+    s = sub.add_parser("compress", help="compression curve of a fabric cell between plates",
+                       description="Yarn-level compression of a fabric cell between rigid plates (contact "
+                       "yarn-yarn and yarn-plate): <cell file stem>_compression.nc/.png.")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP)
+    s.add_argument("--strain", type=fraction, default=0.3, metavar="EPS",
+                   help="final compression = plate displacement / thickness, a fraction in (0, 1) (default: "
+                        "%(default)s, i.e. 30 %%, the model's validity range)")
+    s.add_argument("--steps", type=count, default=20, metavar="N",
+                   help="load steps, integer >= 1; contact is re-linearised per step, so more steps are more "
+                        "accurate (default: %(default)s; the main job uses 50 to 50 %%)")
+    _add_out(s, "results/compress")
     s.set_defaults(func=cmd_compress)
 
-    s = sub.add_parser("seam", help="cushion profile of a seam cell")
-    s.add_argument("cell")
-    s.add_argument("--distance", type=float, required=True, help="seam distance, mm")
-    s.add_argument("--prestrain", type=float, default=None,
-                   help="stitch-yarn pre-strain (default: the cell file's value for the method)")
+    s = sub.add_parser("seam", help="cushion profile of a seam cell",
+                       description="Cushion profile between parallel lock-stitch seams: "
+                       "<cell file stem>_seam_<d>mm_<method>.nc/.png.")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP + "; needs a [parameters.seam] table (spacer_20mm)")
+    s.add_argument("--distance", type=positive, required=True, metavar="D",
+                   help="seam distance, mm, > 0 (required; the yarn-level cell rounds it to whole fabric "
+                        "repeats, e.g. 24 -> 25.4 mm)")
+    s.add_argument("--prestrain", type=prestrain, default=None, metavar="EPS",
+                   help="stitch-yarn pre-strain, a fraction in [0, 1) (default: the cell file's value for the "
+                        "method: 0.3 yarn, 0.4 foundation for spacer_20mm)")
     s.add_argument("--method", choices=("yarn", "foundation"), default="yarn",
-                   help="yarn-level seam cell (default) or the analytical foundation model")
-    s.add_argument("--out")
+                   help="yarn: the yarn-level seam cell (blind, seconds to a minute); foundation: the analytical model "
+                        "calibrated on d = 24 mm (fast) (default: %(default)s)")
+    _add_out(s, "results/seam")
     s.set_defaults(func=cmd_seam)
 
-    s = sub.add_parser("macro", help="force-compression curve of a seamed specimen (cushion layer)")
-    s.add_argument("cell")
-    s.add_argument("--distance", type=float, default=None, help="seam distance, mm (default: no seams)")
-    s.add_argument("--scatter", type=float, default=0.0, help="height scatter between cushions")
-    s.add_argument("--seed", type=int, default=0)
+    s = sub.add_parser("macro", help="force-compression curve of a seamed specimen (cushion layer)",
+                       description="Macro cushion layer: force over punch travel of a (seamed) specimen under "
+                       "the 121 cm^2 plate, with a summary line (max force, force at 30 %, first contact): "
+                       "<cell file stem>_macro_<noseam|d mm>.nc/.png.")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP + "; a spacer cell (spacer_20mm)")
+    s.add_argument("--distance", type=positive, default=None, metavar="D",
+                   help="seam distance, mm, > 0 (default: no seams)")
+    s.add_argument("--steps", type=count, default=None, metavar="N",
+                   help="load steps of the unseamed compression law computed to --strain, integer >= 1 "
+                        "(default: 50, step-converged to 50 %%, as in the main job; fewer steps are faster and "
+                        "stiffer beyond 40 %%)")
+    s.add_argument("--curve", metavar="FILE.nc", default=None,
+                   help="a stored compression law instead: the .nc file `homtex compress` writes (default: none, "
+                        "computed with --steps)")
+    s.add_argument("--strain", type=fraction, default=None, metavar="EPS",
+                   help="final punch travel / thickness, a fraction in (0, 1) (default: 0.5; with --curve where the "
+                        "curve ends, at most 0.5)")
+    s.add_argument("--scatter", type=non_negative, default=0.0, metavar="MM",
+                   help="standard deviation of the cushion-to-cushion height, mm, >= 0 (default: %(default)s)")
+    s.add_argument("--seed", type=seed, default=0, metavar="N",
+                   help="random seed of the height scatter, integer >= 0 (default: %(default)s)")
     s.add_argument("--pre-stress", choices=("thread", "held", "released"), default="thread",
-                   help="who carries a pre-compressed cushion's pre-load under the punch (default: the thread "
-                   "hands it over within its slack travel)")
-    s.add_argument("--slack-travel", type=float, default=None,
-                   help="thread slack travel, mm (default: from the seam profile)")
+                   help="who carries a pre-compressed cushion's pre-load under the punch: the thread hands it "
+                        "over within its slack travel (thread), keeps it (held) or drops it at contact (released) "
+                        "(default: %(default)s)")
+    s.add_argument("--slack-travel", type=length_or_inf, default=None, metavar="MM",
+                   help="thread slack travel, mm, >= 0 or inf (default: from the seam profile)")
     s.add_argument("--seam-method", choices=("yarn", "foundation"), default="yarn",
-                   help="seam model that gives the cushion profile (default: the yarn-level seam cell)")
-    s.add_argument("--out")
+                   help="seam model that gives the cushion profile: yarn-level seam cell or the calibrated "
+                        "foundation model (default: %(default)s)")
+    _add_out(s, "results/macro")
     s.set_defaults(func=cmd_macro)
 
     s = sub.add_parser("study", help="run a parameter study (resumable)",
@@ -183,30 +343,87 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep the recorded errors of points that failed in an earlier run (default: retry them)")
     s.set_defaults(func=cmd_study)
 
-    s = sub.add_parser("plot", help="chart of a homtex netCDF file")
-    s.add_argument("file")
-    s.add_argument("--out", default=None)
+    s = sub.add_parser("plot", help="chart of a homtex netCDF file",
+                       description="The chart of a netCDF file homtex wrote: the dedicated chart of its kind "
+                       "(compression curve, seam profile, macro curve, study result, homogenisation, ...), else "
+                       "one panel per unit.")
+    s.add_argument("file", metavar="FILE.nc", help="a netCDF file written by homtex (path)")
+    s.add_argument("--out", default=None, metavar="IMAGE",
+                   help="image file to write; the format follows the extension (.png, .pdf, .svg, ...) "
+                        "(default: FILE with .png)")
+    s.add_argument("--var", default=None, metavar="NAME",
+                   help="variable to draw (studies and generic charts; default: the first that fits)")
+    s.add_argument("--sel", action="append", default=None, metavar="DIM=VALUE",
+                   help="one value of a further dimension of --var, e.g. --sel row=11 --sel col=11 "
+                        "(repeatable; default: none)")
     s.set_defaults(func=cmd_plot)
+    for name, sp in sub.choices.items():   # --debug also after the command (homtex seam ... --debug)
+        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="show the full traceback of an error")
+    p.commands = dict(sub.choices)
     return p
+
+
+class _Console(logging.StreamHandler):
+    """A handler writing to whatever sys.stdout is at the time (a progress bar's proxy, pytest's capture)."""
+
+    @property
+    def stream(self):
+        return sys.stdout
+
+    @stream.setter
+    def stream(self, value):
+        pass
 
 
 def _log_to_console() -> logging.Handler:
     """INFO and above from the homtex loggers on stdout (what a long stage is doing)."""
-    handler = logging.StreamHandler(sys.stdout)
+    handler = _Console()
     handler.setFormatter(logging.Formatter("%(message)s"))
     log.addHandler(handler)
     log.setLevel(logging.INFO)
     return handler
 
 
+#: a user's mistake: bad input (InputError), a failed solve (SolverError) or the system refusing
+#: (a missing, unreadable or unwritable file or folder, a full disk, an unreachable scheduler)
+USER_ERRORS = (InputError, SolverError, OSError)
+
+
+def _message(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and not isinstance(exc, (InputError, SolverError)) and exc.strerror:
+        where = f": {exc.filename}" if exc.filename else ""
+        return f"{exc.strerror}{where}"
+    return str(exc) or type(exc).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run the command line; returns the exit status (0 ok, 2 a user's mistake, 3 an internal error)."""
+    parser = build_parser()
+    try:
+        args, extra = parser.parse_known_args(argv)
+        if extra:   # an unknown option belongs to the subcommand: its usage and a suggestion
+            parser.commands[args.command].error(
+                f"unrecognized arguments: {' '.join(extra)}")
+    except SystemExit as exc:   # --help, --version, a usage error (argparse printed it)
+        return exc.code if isinstance(exc.code, int) else 2
     handler = _log_to_console()
     try:
         args.func(args)
-    except (InputError, SolverError, FileNotFoundError) as exc:
-        print(f"homtex {args.command}: error: {exc}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print(f"homtex {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except USER_ERRORS as exc:
+        if args.debug:
+            raise
+        print(f"homtex {args.command}: error: {_message(exc)}", file=sys.stderr)
         return 2
+    except Exception as exc:  # noqa: BLE001 - anything else is ours: one line, and how to report it
+        if args.debug:
+            raise
+        print(f"homtex {args.command}: internal error ({type(exc).__name__}: {_message(exc)}); run it again with "
+              f"--debug for the traceback and report it", file=sys.stderr)
+        return 3
     finally:
         log.removeHandler(handler)
     return 0

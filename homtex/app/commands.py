@@ -1,36 +1,66 @@
 """The stage commands of the ``homtex`` command line: one function per subcommand, writing
-netCDF + PNG and returning the Dataset and the paths."""
+netCDF + PNG into an output folder and returning the Dataset and the paths.
+
+Output names start with the cell FILE's stem, sanitised (``cells/spacer_20mm.toml`` ->
+``spacer_20mm_...``): two cells never overwrite each other's files, and a cell's ``name``
+field (free text in the file) never becomes a path.
+"""
 
 from __future__ import annotations
 
+import difflib
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
 from ..analysis.homogenize import homogenize
-from ..cells import load_cell
+from ..api import compress
+from ..cells import find_cell, load_cell, shipped_cells
 from ..errors import InputError
 from ..macro import macro_curve
-from ..output.plot import plot_cell, plot_profile
+from ..output.charts import save, seam_profile_chart
+from ..output.charts_data import chart, generic_chart, homogenization_chart
+from ..output.plot import plot_cell
 from ..output.vtk import write_vtk
 from ..seams import seam_profile
-from .stages import _attrs, _plt, _save, unseamed_stage
+from .paths import check_image_path, heartbeat, stem_of
+from .stages import _attrs, _save, describe, unseamed_stage
 
 log = logging.getLogger(__name__)
 
 
-def _load(path):
+# ----------------------------------------------------------------------------- cells
 
-    return load_cell(path)
+
+def load(cell_arg):
+    """The cell of a command-line CELL argument (a file path or a shipped cell name); a wrong
+    name is an InputError that lists the shipped cells and the closest one."""
+    text = str(cell_arg)
+    if not text.strip():
+        raise InputError(f"CELL is empty: give a .toml cell file or a shipped cell name ({', '.join(shipped_cells())})")
+    p = find_cell(text)
+    if p.is_dir():
+        raise InputError(f"{text}: is a folder, not a cell file (give a .toml cell file or a shipped cell name: "
+                         f"{', '.join(shipped_cells())})")
+    if not p.exists():
+        names = shipped_cells()
+        near = difflib.get_close_matches(Path(text).stem, names, n=1)
+        raise InputError(f"{text}: no such cell file, nor a shipped cell of that name"
+                         + (f" (did you mean {near[0]}?)" if near else "")
+                         + f"; shipped cells: {', '.join(names)}")
+    return load_cell(p)
 
 
 def cell_summary(path, out: Path) -> dict:
-    """Picture (yarn systems coloured), VTK (if meshio is installed) and a text summary."""
+    """Picture (yarn systems coloured), VTK (if meshio is installed) and a text summary,
+    written as ``<stem>_cell.png/.vtu/.txt``."""
 
-    cell = _load(path)
+    cell = load(path)
     out = Path(out)
+    stem = stem_of(cell)
     f = cell.frame
     lines = [f"cell {cell.name} ({cell.path}): generator {cell.generator}",
              f"  {f.n_nodes} nodes, {f.n_elements} elements, {f.ndof} DOF, {f.dim_periodic}-periodic",
@@ -41,111 +71,168 @@ def cell_summary(path, out: Path) -> dict:
             v = cell.info[key]
             lines.append(f"  {key}: {len(v) if hasattr(v, '__len__') else v}")
     log.info("\n".join(lines))
-    paths = {"picture": plot_cell(cell, out / f"{cell.name}.png")}
+    paths = {"picture": plot_cell(cell, out / f"{stem}_cell.png",
+                                  title=f"{cell.name}: {f.n_elements} elements, {f.ndof} DOF")}
     try:
 
-        paths["VTK"] = write_vtk(f, out / f"{cell.name}.vtu")
+        paths["VTK"] = write_vtk(f, out / f"{stem}_cell.vtu")
     except InputError as exc:   # meshio missing
         log.warning("  (no VTK: %s)", exc)
-    txt = out / f"{cell.name}.txt"
+    txt = out / f"{stem}_cell.txt"
     txt.write_text("\n".join(lines) + "\n")
     paths["summary"] = txt
     return paths
 
 
 def homogenize_cell(path, out: Path, *, solver="amg"):
-    """Effective stiffness of a periodic cell file: netCDF + a PNG of C and the constants.
+    """Effective stiffness of a periodic cell file: ``<stem>_homogenized.nc`` + a chart of C and
+    the engineering constants. Returns (Dataset, [paths])."""
 
-    Returns (Dataset, [paths]).
-    """
-
-    cell = load_cell(path)
-    res = homogenize(cell.frame, solver=solver)
+    cell = load(path)
+    with heartbeat(f"homogenisation of {cell.name} ({solver})"):
+        res = homogenize(cell.frame, solver=solver)
     ds = res.to_dataset()
     ds.attrs.update({f"cell_{k}": v for k, v in cell.attrs().items()})
     _attrs(ds, title=f"effective stiffness of {cell.name}")
+    describe(ds, "homogenization", cell, coords={
+        "row": ("1", "Voigt component (row of C)"), "col": ("1", "Voigt component (column of C)"),
+        "row_full": ("1", "Voigt component (row of C_full)"), "col_full": ("1", "Voigt component (column of C_full)"),
+        "case": ("1", "unit load case (Voigt component)")})
     out = Path(out)
-    nc = _save(ds, out / f"{cell.name}_homogenized.nc")
-
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(5.5, 4.5))
-    C = res.C
-    im = ax.imshow(C, cmap="viridis")
-    for (i, j), v in np.ndenumerate(C):
-        ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=7, color="w")
-    ax.set_xticks(range(len(res.components)), res.components)
-    ax.set_yticks(range(len(res.components)), res.components)
-    fig.colorbar(im, ax=ax, label=res.units)
-    consts = ", ".join(f"{k}={v:.3g}" for k, v in res.engineering_constants().items())
-    ax.set_title(f"{cell.name}: C ({res.units})\n{consts}", fontsize=8)
-    fig.tight_layout()
-    png = out / f"{cell.name}_homogenized.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    stem = stem_of(cell)
+    nc = _save(ds, out / f"{stem}_homogenized.nc")
+    png = save(homogenization_chart(ds), out / f"{stem}_homogenized.png")
     return ds, [nc, png]
 
 
 def compress_cell(path, out: Path, *, strain=0.3, steps=20):
-    cell = _load(path)
-    curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True)
+    """Yarn-level compression between rigid plates: ``<stem>_compression.nc/.png``."""
+    cell = load(path)
+    curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True,
+                                        name=f"{stem_of(cell)}_compression")
     log.info(f"modulus {summ['modulus_kPa']:.1f} kPa; stress at 10/25/40 %: {summ['stress_10_kPa']:.2f} / "
-          f"{summ['stress_25_kPa']:.2f} / {summ['stress_40_kPa']:.2f} kPa; status {curve.attrs['status']}")
+             f"{summ['stress_25_kPa']:.2f} / {summ['stress_40_kPa']:.2f} kPa; status {curve.attrs['status']}")
     return curve, list(paths.values())
 
 
 def seam_cell(path, out: Path, *, seam_distance, prestrain=None, method="yarn"):
-
-    cell = _load(path)
-    prof = seam_profile(cell, seam_distance=seam_distance, prestrain=prestrain, method=method)
+    """Cushion profile of a seam: ``<stem>_seam_<d>mm_<method>.nc/.png``."""
+    cell = load(path)
+    with heartbeat(f"seam profile ({method} model), d = {float(seam_distance):g} mm"):
+        prof = seam_profile(cell, seam_distance=seam_distance, prestrain=prestrain, method=method)
     out = Path(out)
-    stem = f"{cell.name}_seam_{float(seam_distance):g}mm_{method}"
-    nc = _save(_attrs(prof, title=f"cushion profile, d = {seam_distance} mm"), out / f"{stem}.nc")
-    png = plot_profile(prof, out / f"{stem}.png")
+    describe(prof, "seam_profile", cell)
+    prof.attrs.setdefault("requested_seam_distance_mm", float(seam_distance))
+    stem = f"{stem_of(cell)}_seam_{float(seam_distance):g}mm_{method}"
+    nc = _save(_attrs(prof, title=f"{cell.name}: cushion profile, d = {seam_distance:g} mm"), out / f"{stem}.nc")
+    png = save(seam_profile_chart(prof), out / f"{stem}.png")
     return prof, [nc, png]
 
 
+# ----------------------------------------------------------------------------- macro layer
+def read_dataset(path, what="netCDF file") -> xr.Dataset:
+    """A netCDF file loaded into memory; InputError naming the file when it is missing, a folder
+    or not netCDF."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a {what}")
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    try:
+        with xr.open_dataset(p, engine="netcdf4") as ds:
+            return ds.load()
+    except PermissionError:
+        raise InputError(f"{p}: cannot read it (permission denied)") from None
+    except (OSError, ValueError, RuntimeError, TypeError, KeyError, IndexError, UnicodeError) as exc:
+        raise InputError(f"{p}: not a {what} homtex can read ({type(exc).__name__}: {exc})") from None
+
+
+def _stored_curve(path) -> xr.Dataset:
+    ds = read_dataset(path, "compression curve (netCDF)")
+    if "stress" not in ds or "strain" not in ds.coords:
+        raise InputError(f"{path}: not a compression curve (it has no 'stress' over 'strain'; `homtex compress` "
+                         f"writes one); its variables: {', '.join(map(str, ds.data_vars)) or 'none'}")
+    if not np.isfinite(ds.stress.values).any():
+        raise InputError(f"{path}: the compression curve has no finite points (status: {ds.attrs.get('status', '?')})")
+    return ds
+
+
+def macro_summary(ds) -> str:
+    """One line: max force, force at 30 % compression, first contact, status."""
+    w, F = ds.plate_displacement.values, ds.force.values
+    H0 = float(ds.attrs["thickness_mm"])
+    i = int(np.nanargmax(F)) if np.isfinite(F).any() else 0
+    w30 = 0.3 * H0
+    f30 = float(np.interp(w30, w, F)) if w[-1] >= w30 - 1e-9 else math.nan
+    touch = np.flatnonzero(F > 0)
+    first = float(w[touch[0]]) if touch.size else math.nan
+    return (f"max force {F[i]:.1f} N at {w[i]:.2f} mm ({100 * w[i] / H0:.0f} %); force at 30 % ({w30:.1f} mm) "
+            f"{f30:.1f} N; first contact at {first:.2f} mm (crests {float(ds.attrs['first_contact_mm']):.2f} mm "
+            f"below the {H0:g} mm plate distance); law: {ds.attrs.get('compression_law', '?')}; "
+            f"status {ds.attrs.get('status', 'ok')}")
+
+
 def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0, pre_stress="thread",
-               slack_travel=None, seam_method="yarn"):
+               slack_travel=None, seam_method="yarn", steps=50, strain=None, curve=None):
+    """Macro cushion layer of a seamed specimen under the 121 cm^2 plate:
+    ``<stem>_macro_<noseam|d mm>.nc/.png``. The unseamed compression law comes from ``curve``
+    (a stored ``homtex compress`` netCDF file) or is computed to ``strain`` in ``steps`` steps
+    (default 50 to 50 %, step-converged as in the main job). ``strain``: final punch travel / thickness
+    (default 0.5; with a stored curve, where it ends, at most 0.5). Returns (Dataset, [paths], summary line)."""
 
-    cell = _load(path)
+    cell = load(path)
+    if curve is not None:
+        law = _stored_curve(curve)
+        if strain is None:
+            strain = min(0.5, float(np.nanmax(law.strain.values)))
+        source = f"stored curve {curve} ({law.sizes['strain']} points to {float(law.strain.max()):.3g})"
+    else:
+        strain = 0.5 if strain is None else strain
+        with heartbeat(f"compression law of {cell.name}: {steps} steps to {100 * strain:g} %"):
+            law = compress(cell, strain=strain, steps=steps, progress=True)
+        source = f"computed, {steps} steps to {100 * strain:g} %"
     ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,
-                     pre_stress=pre_stress, slack_travel=slack_travel,
+                     pre_stress=pre_stress, slack_travel=slack_travel, curve=law, strain=strain,
                      profile_options={"method": seam_method})
-    ds.attrs["seam_method"] = seam_method
+    ds.attrs.update(seam_method=seam_method, compression_law=source)
+    describe(ds, "macro_curve", cell)
     out = Path(out)
-    stem = f"{cell.name}_macro_" + ("noseam" if seam_distance is None else f"{float(seam_distance):g}mm")
-    nc = _save(_attrs(ds, title="macro cushion layer"), out / f"{stem}.nc")
-    return ds, [nc, plot_file(nc, out / f"{stem}.png")]
+    stem = f"{stem_of(cell)}_macro_" + ("noseam" if seam_distance is None else f"{float(seam_distance):g}mm")
+    nc = _save(_attrs(ds, title=f"{cell.name}: macro cushion layer"), out / f"{stem}.nc")
+    line = macro_summary(ds)
+    log.info(line)
+    return ds, [nc, plot_file(nc, out / f"{stem}.png")], line
 
 
-def plot_file(path, out=None) -> Path:
-    """A chart of any homtex netCDF file: every 1-D variable against its dimension
-    (one panel per dimension, variables with the same units share an axis)."""
+# ----------------------------------------------------------------------------- plot
+def parse_sel(items) -> dict:
+    """["dim=value", ...] -> {dim: "value"}; InputError for an item without '='."""
+    out = {}
+    for it in items or []:
+        dim, eq, val = str(it).partition("=")
+        if not eq or not dim.strip():
+            raise InputError(f"--sel {it}: write DIM=VALUE, e.g. --sel row=11")
+        out[dim.strip()] = val.strip()
+    return out
+
+
+def plot_file(path, out=None, *, var=None, sel=None) -> Path:
+    """The chart of a homtex netCDF file: the dedicated chart of its kind (compression curve, seam
+    profile, macro curve, study result, homogenisation, ...), else one panel per unit.
+    ``out``: image file (format from its extension; default: the file with .png)."""
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no such file: {path}")
-    with xr.open_dataset(path) as ds:
-        ds = ds.load()
-    groups: dict = {}
-    for name, v in ds.data_vars.items():
-        if v.ndim == 1 and np.issubdtype(v.dtype, np.number):
-            groups.setdefault(v.dims[0], []).append(name)
-    if not groups:
-        raise InputError(f"{path}: no 1-D numeric variable to plot")
-    plt = _plt()
-    fig, axes = plt.subplots(len(groups), 1, figsize=(7, 3.2 * len(groups)), squeeze=False)
-    for ax, (dim, names) in zip(axes[:, 0], groups.items()):
-        xdim = ds[dim] if dim in ds.coords else np.arange(ds.sizes[dim])
-        for name in names[:8]:
-            v = ds[name]
-            ax.plot(np.asarray(xdim), v.values, marker=".",
-                    label=f"{v.attrs.get('long_name', name)} [{v.attrs.get('units', '')}]")
-        unit = ds[dim].attrs.get("units", "") if dim in ds.coords else ""
-        ax.set(xlabel=f"{dim} [{unit}]" if unit else dim)
-        ax.legend(fontsize=7)
-    fig.suptitle(ds.attrs.get("title", path.name), fontsize=9)
-    fig.tight_layout()
-    png = Path(out) if out else path.with_suffix(".png")
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    png = check_image_path(Path(out) if out else path.with_suffix(".png"))
+    ds = read_dataset(path)
+    try:
+        fig = chart(ds, var=var, sel=parse_sel(sel) if isinstance(sel, (list, tuple)) else sel)
+    except InputError:
+        raise
+    except (KeyError, ValueError, IndexError, TypeError, AttributeError) as exc:
+        log.warning("  the dedicated chart of %s failed (%s: %s); drawing the generic one", path.name,
+                    type(exc).__name__, exc)
+        fig = generic_chart(ds)
+    return save(fig, png)
+
+
+__all__ = ["cell_summary", "compress_cell", "homogenize_cell", "load", "macro_cell",
+           "macro_summary", "plot_file", "read_dataset", "seam_cell"]

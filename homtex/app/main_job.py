@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..cells import load_cell
 from ..output.plot import plot_cell
+from .paths import heartbeat
 from .stages import (
     SPACER_CELL,
     _markdown_table,
@@ -41,10 +42,13 @@ def main_job(out: Path, *, quick: bool = False) -> dict:
     def stage(msg):
         log.info("[%6.1f s] %s", time.perf_counter() - t0, msg)
 
-    outputs.update(lattice_demo(out, repeat=(3, 3, 3) if quick else (6, 6, 6)))
+    log.info("homtex main job (%s) into %s: 7 stages; a line at least every 10 s", "quick" if quick else "full", out)
+    with heartbeat("lattice demo: octet block with amg, direct and cg"):
+        outputs.update(lattice_demo(out, repeat=(3, 3, 3) if quick else (6, 6, 6)))
     stage("lattice demo (amg, direct, cg on the same octet block) done")
     cell = load_cell(SPACER_CELL)
-    outputs["spacer cell (picture)"] = plot_cell(cell, out / "spacer_cell.png")
+    outputs["spacer cell (picture)"] = plot_cell(cell, out / "spacer_cell.png",
+                                                 title=f"{cell.name}: the unseamed spacer cell by yarn system")
     # 50 load steps to 50 %: step-converged (contact is re-linearised per step; 25 steps are up to 5 %
     # off around 24 %, where new contacts form; 50 steps 1.2 %, 100 and 200 steps agree)
     curve, summ, paths = unseamed_stage(cell, out, strain=0.5, steps=50)
@@ -54,7 +58,8 @@ def main_job(out: Path, *, quick: bool = False) -> dict:
     outputs.update(paths)
     stage("cushion profiles done")
     # the macro curves use the fitted (foundation) cushions, which reproduce the measured heights
-    macro, paths = macro_stage(cell, curve, profiles["foundation"], out, strain=0.5)
+    with heartbeat("macro curves: no seams and d = 18, 24, 43 mm"):
+        macro, paths = macro_stage(cell, curve, profiles["foundation"], out, strain=0.5)
     outputs.update(paths)
     stage("macro curves done")
     # yarn level against macro on the same physics: the macro layer fed the yarn-level cushions

@@ -20,14 +20,44 @@ from ..errors import InputError
 from ..geometry.lattices import lattice_frame
 from ..lookup import Lookup
 from ..macro import macro_curve
+from ..output.charts import (
+    PAPER_CUSHIONS_MM,
+    _tag,
+    compression_chart,
+    cushions_chart,
+    macro_chart,
+    save,
+    seamed_chart,
+    speed_accuracy_chart,
+)
 from ..output.io import write_netcdf
 from ..seams import seam_compression, seam_profile
+from .paths import heartbeat
 
 log = logging.getLogger(__name__)
 
 
 def _attrs(ds: xr.Dataset, **extra) -> xr.Dataset:
     ds.attrs.update({"homtex_version": __version__, **{k: str(v) for k, v in extra.items()}})
+    return ds
+
+
+def describe(ds: xr.Dataset, kind: str, cell=None, coords: dict | None = None) -> xr.Dataset:
+    """Mark what a Dataset is (``homtex_kind``: the chart ``homtex plot`` draws), which cell it
+    belongs to (``cell_name``, ``cell_file``) and give its coordinates units and long names
+    (``coords``: {name: (units, long_name)}; others without them get "1" and their name)."""
+    ds.attrs["homtex_kind"] = kind
+    if cell is not None:
+        ds.attrs["cell_name"] = str(getattr(cell, "name", cell))
+        if getattr(cell, "path", None):
+            ds.attrs["cell_file"] = str(cell.path)
+        if isinstance(getattr(cell, "info", None), dict) and "thickness" in cell.info:
+            ds.attrs.setdefault("thickness_mm", float(cell.info["thickness"]))
+    for name, (units, long_name) in (coords or {}).items():
+        ds[name].attrs.update(units=units, long_name=long_name)
+    for name in ds.coords:
+        ds[name].attrs.setdefault("units", "1")
+        ds[name].attrs.setdefault("long_name", str(name))
     return ds
 
 
@@ -83,6 +113,9 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
         coords={"solver": list(results), "dof": ["ux", "uy", "uz", "rx", "ry", "rz"], "xyz": ["x", "y", "z"]},
     )
     _attrs(ds, title="octet lattice block under 1 % compression", ndof=f.ndof, n_elements=f.n_elements)
+    describe(ds, "generic", "octet lattice block", coords={
+        "solver": ("1", "linear solver"), "dof": ("1", "degree of freedom (translations mm, rotations rad)"),
+        "xyz": ("1", "coordinate axis")})
     nc = _save(ds, out / "lattice_demo.nc")
 
     plt = _plt()
@@ -93,20 +126,25 @@ def lattice_demo(out: Path, *, repeat=(6, 6, 6), radius=0.05, elements_per_strut
     lim = np.abs(r.axial_force).max()
     lc = LineCollection(seg, array=r.axial_force, cmap="coolwarm", linewidths=0.6)
     lc.set_clim(-lim, lim)
+    _tag(ax[0], "mm", "z", lc)
     ax[0].add_collection(lc)
     ax[0].autoscale()
     ax[0].set_aspect("equal")
     fig.colorbar(lc, ax=ax[0], label="axial force, N")
-    ax[0].set(xlabel="x, mm", ylabel="z, mm", title=f"octet block, {f.ndof} DOF: axial force (side view)")
+    ax[0].set(xlabel="x, mm", title=f"octet lattice block {'x'.join(map(str, repeat))}, {f.ndof} DOF, 1 % "
+              "compression:\naxial force (side view)")
     names = list(results)
-    ax[1].bar(names, [p.setup_seconds + p.solve_seconds for p in reps])
+    bars = ax[1].bar(names, [p.setup_seconds + p.solve_seconds for p in reps])
+    _tag(ax[1], "s", "setup + solve time", *bars.patches)
     for i, p in enumerate(reps):
-        ax[1].text(i, p.setup_seconds + p.solve_seconds, f"{p.iterations} it", ha="center", va="bottom")
-    ax[1].set(ylabel="setup + solve, s", title="solvers on the same system")
+        ax[1].text(i, p.setup_seconds + p.solve_seconds, f"{p.iterations} iterations" if p.iterations
+                   else "direct solve", ha="center", va="bottom")
+    ax[1].set(xlabel="linear solver", title="octet lattice block: the solvers on the same system (they agree to "
+              f"{float(ds['max_difference'].max()):.0e})")
+    ax[0].title.set_fontsize(9)
+    ax[1].title.set_fontsize(9)
     fig.tight_layout()
-    png = out / "lattice_demo.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    png = save(fig, out / "lattice_demo.png")
     return {"lattice demo (netCDF)": nc, "lattice demo (chart)": png}
 
 
@@ -128,41 +166,22 @@ def _timed(fn, *args, **kw):
     return out, time.perf_counter() - t0
 
 
-def unseamed_stage(cell, out: Path, *, strain=0.5, steps=25, progress=False) -> tuple:
+def unseamed_stage(cell, out: Path, *, strain=0.5, steps=25, progress=False, name="unseamed_compression") -> tuple:
     """Yarn-level compression of the unseamed cell between plates: curve, modulus, DIN-style
-    stresses, energy by yarn system. Returns (curve Dataset, summary dict, {name: path})."""
+    stresses, energy by yarn system; written as ``<name>.nc/.png``.
+    Returns (curve Dataset, summary dict, {name: path})."""
 
-    curve, sec = _timed(compress, cell, strain=strain, steps=steps, progress=progress)
+    with heartbeat(f"yarn-level compression of {cell.name} to {100 * strain:g} % in {steps} steps"):
+        curve, sec = _timed(compress, cell, strain=strain, steps=steps, progress=progress)
     if curve.sizes["strain"] == 0:
         raise InputError(f"unseamed compression of {cell.name} failed at once: {curve.attrs['status']}")
     summ = compression_summary(curve)
     curve.attrs.update({f"cell_{k}": v for k, v in cell.attrs().items()})
     curve.attrs.update(title=f"{cell.name}: yarn-level compression between rigid plates", seconds=sec,
                        modulus_kPa=summ["modulus_kPa"], validity_strain=0.30)
-    nc = _save(_attrs(curve), out / "unseamed_compression.nc")
-    plt = _plt()
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
-    e, sg = curve.strain.values, curve.stress.values
-    ok = e <= 0.30 + 1e-12
-    ax[0].plot(100 * e[ok], sg[ok], "o-", ms=3, label="yarn level (model valid)")
-    ax[0].plot(100 * e[~ok], sg[~ok], "o--", ms=3, color="tab:red", label="beyond 30 % (large rotations ignored)")
-    ax[0].axvline(30, color="0.6", lw=0.8)
-    ax[0].set(xlabel="compression, %", ylabel="stress, kPa",
-              title=f"unseamed, E_c = {summ['modulus_kPa']:.0f} kPa ({sec:.1f} s)")
-    ax[0].legend(fontsize=8)
-    if "group_energy" in curve:
-        ge = curve["group_energy"]
-        for g in ge.group.values:
-            ax[1].plot(100 * e, ge.sel(group=g).values, label=str(g))
-    for k in ("bending_y", "bending_z", "axial", "torsion", "shear", "contact_energy"):
-        ax[1].plot(100 * e, curve[k].values, ":", lw=1, label=k)
-    ax[1].set(xlabel="compression, %", ylabel="energy per cell, N mm", yscale="log",
-              title="energy by yarn system (solid) and mechanism (dotted)")
-    ax[1].legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    png = out / "unseamed_compression.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    describe(curve, "compression", cell)
+    nc = _save(_attrs(curve), out / f"{name}.nc")
+    png = save(compression_chart(curve), out / f"{name}.png")
     return curve, summ, {"unseamed curve (netCDF)": nc, "unseamed curve (chart)": png}
 
 
@@ -181,7 +200,8 @@ def cushion_stage(cell, out: Path, *, distances=(18.0, 24.0, 43.0), low_prestrai
     cases = [(float(d), None) for d in distances] + [(float(max(distances)), low_prestrain)]
     for m in methods:
         for d, eps0 in cases:
-            prof, sec = _timed(seam_profile, cell, seam_distance=d, prestrain=eps0, method=m)
+            with heartbeat(f"seam profile ({m} model), d = {d:g} mm" + ("" if eps0 is None else f", eps0 = {eps0:g}")):
+                prof, sec = _timed(seam_profile, cell, seam_distance=d, prestrain=eps0, method=m)
             if prof.attrs.get("status", "ok") != "ok":
                 raise InputError(f"seam profile ({m}, d = {d:g} mm) failed: {prof.attrs['status']}")
             profiles[m][(d, eps0)] = prof
@@ -194,13 +214,25 @@ def cushion_stage(cell, out: Path, *, distances=(18.0, 24.0, 43.0), low_prestrai
                      f"{float(y['prestrain']):.2f}", f"{float(y['cushion_height']):.2f}",
                      f"{float(y['seam_height']):.2f}", f"{secs['yarn'][(d, eps0)]:.1f}",
                      f"{float(f['prestrain']):.3f}", f"{float(f['cushion_height']):.2f}", meas, sim))
-    keys = cases
+    ds = _cushion_dataset(cell, profiles, secs, cases)
+    nc = _save(_attrs(ds, title="cushion heights and profiles (yarn-level and foundation seam models)"),
+               out / "cushions.nc")
+    png = save(cushions_chart(ds), out / "cushions.png")
+    return profiles, rows, {"cushion heights (netCDF)": nc, "cushion profiles (chart)": png}
+
+
+def _cushion_dataset(cell, profiles, secs, keys) -> xr.Dataset:
+    """cushions.nc: every case's profile on xi = x / effective seam distance (x = 0: the seam
+    line), heights, effective seam distances and the paper's measured and simulated heights."""
+    methods = ("yarn", "foundation")
     xi = np.linspace(-0.5, 0.5, 121)
 
+    def d_eff(p, d):
+        return float(p.attrs.get("effective_seam_distance_mm", d))
+
     def on_xi(p, d):
-        dd = float(p.attrs.get("effective_seam_distance_mm", d))
-        xs = p.x.values - 0.5 * (p.x.values[0] + p.x.values[-1])   # centre the seam cell on 0
-        return np.interp(xi * dd, xs, p.height.values)
+        dd = d_eff(p, d)   # x = 0 is the seam line in both models; the profile repeats every dd
+        return np.interp(xi * dd, p.x.values, p.height.values, period=dd)
 
     data = {}
     for m in methods:
@@ -213,40 +245,27 @@ def cushion_stage(cell, out: Path, *, distances=(18.0, 24.0, 43.0), low_prestrai
                                     {"units": "mm", "long_name": f"height at the seam line, {m} model"})
         data[f"prestrain_{m}"] = ("case", [float(P[k]["prestrain"]) for k in keys],
                                   {"units": "1", "long_name": f"stitch-yarn pre-strain, {m} model"})
+        data[f"seam_distance_{m}"] = ("case", [d_eff(P[k], k[0]) for k in keys],
+                                      {"units": "mm", "long_name": f"effective seam distance (the profile's period), "
+                                       f"{m} model"})
         data[f"seconds_{m}"] = ("case", [secs[m][k] for k in keys], {"units": "s", "long_name": f"run time, {m} model"})
     data["seam_distance"] = ("case", [k[0] for k in keys], {"units": "mm", "long_name": "seam distance asked for"})
+    ref = sorted(PAPER_CUSHIONS_MM.items())
+    for i, (var, what) in enumerate((("cushion_height_measured_low", "measured cushion height, lower end (paper, "
+                                      "Table 1)"),
+                                     ("cushion_height_measured_high", "measured cushion height, upper end (paper, "
+                                      "Table 1)"),
+                                     ("cushion_height_paper_simulation", "cushion height simulated in the paper"))):
+        data[var] = ("paper_distance", [r[i] for _, r in ref], {"units": "mm", "long_name": what})
     ds = xr.Dataset(data, coords={
+        "paper_distance": ("paper_distance", [d for d, _ in ref],
+                           {"units": "mm", "long_name": "seam distance of the paper's specimens"}),
         "case": [f"d={k[0]:g}" + ("" if k[1] is None else f", eps0={k[1]:g}") for k in keys],
-        "xi": ("xi", xi, {"units": "1", "long_name": "position across the seam / seam distance (0: midway)"})})
+        "xi": ("xi", xi, {"units": "1", "long_name": "position across the seam / effective seam distance "
+                          "(0: the seam line, +-0.5: midway between seams)"})})
     ds.attrs.update(yarn_model=str(profiles["yarn"][keys[0]].attrs.get("model", "yarn-level seam cell")),
                     foundation_model=str(profiles["foundation"][keys[0]].attrs.get("description", "")))
-    nc = _save(_attrs(ds, title="cushion heights and profiles (yarn-level and foundation seam models)"),
-               out / "cushions.nc")
-    plt = _plt()
-    fig, axes = plt.subplots(len(keys) + 1, 2, figsize=(13, 1.7 * (len(keys) + 1)), sharex=True)
-    H0 = float(cell.info["thickness"])
-    width = 3 * max(k[0] for k in keys)
-    for col, m in enumerate(methods):
-        for ax, k in zip(axes[:, col], keys):
-            p = profiles[m][k]
-            dd = float(p.attrs.get("effective_seam_distance_mm", k[0]))
-            # one period, closed with its first sample one seam distance on (no gaps between repeats)
-            x0 = np.r_[p.x.values - p.x.values[0], dd]
-            hh = np.r_[p.height.values, p.height.values[0]]
-            for rep in range(int(np.ceil(width / dd)) + 1):
-                ax.fill_between(x0 + rep * dd, 0.5 * (H0 - hh), 0.5 * (H0 + hh),
-                                color="tab:blue" if m == "yarn" else "tab:green", alpha=0.55, lw=0)
-            ax.set(ylim=(-1, H0 + 2), xlim=(0, width), ylabel="z, mm")
-            ax.set_title(f"{m}: {ds.case.values[keys.index(k)]}, cushion {float(p['cushion_height']):.2f} mm, "
-                         f"seam line {float(p['seam_height']):.2f} mm", fontsize=8)
-        axes[-1, col].fill_between([0, width], 0, H0, color="0.6", lw=0)
-        axes[-1, col].set(ylim=(-1, H0 + 2), xlabel="x across the seams, mm", ylabel="z, mm")
-        axes[-1, col].set_title(f"without seams: {H0:g} mm", fontsize=8)
-    fig.tight_layout()
-    png = out / "cushions.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return profiles, rows, {"cushion heights (netCDF)": nc, "cushion profiles (chart)": png}
+    return describe(ds, "cushions", cell, coords={"case": ("1", "seam distance asked for, mm, and pre-strain")})
 
 
 def macro_stage(cell, curve, profiles, out: Path, *, distances=(18.0, 24.0, 43.0), scatter=1.0,
@@ -274,22 +293,12 @@ def macro_stage(cell, curve, profiles, out: Path, *, distances=(18.0, 24.0, 43.0
                 "plate_displacement": ("plate_displacement", w, {"units": "mm",
                                        "long_name": "punch travel from 20 mm plate distance"})})
     out_ds.attrs.update(height_scatter_mm=scatter, seed=seed, status="; ".join(
-        f"{n}: {c.attrs.get('status', 'ok')}" for n, c in zip(names, curves)))
+        f"{n}: {c.attrs.get('status', 'ok')}" for n, c in zip(names, curves)),
+        plate_area_mm2=float(curves[0].attrs.get("plate_area_mm2", 12100.0)))
+    describe(out_ds, "macro_curves", cell, coords={"specimen": ("1", "specimen (seam distance)")})
     nc = _save(_attrs(out_ds, title="macro cushion layer: force-compression of seamed specimens"),
                out / "macro_curves.nc")
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for n, row in zip(names, F):
-        ax.plot(w, row, label=n)
-    ax.axvline(0.3 * float(cell.info["thickness"]), color="0.6", lw=0.8, ls="--")
-    ax.text(0.3 * float(cell.info["thickness"]), ax.get_ylim()[1] * 0.9, " 30 %", fontsize=8)
-    ax.set(xlabel="compression distance from 20 mm plate distance, mm", ylabel="force, N",
-           title=f"macro cushion layer, 121 cm^2 plate (cushion scatter {scatter:g} mm)")
-    ax.legend()
-    fig.tight_layout()
-    png = out / "macro_curves.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    png = save(macro_chart(out_ds), out / "macro_curves.png")
     return out_ds, {"macro curves (netCDF)": nc, "macro curves (chart)": png}
 
 
@@ -309,7 +318,8 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
 
     H0 = float(cell.info["thickness"])
     d = float(seam_distance)
-    yarn, t_yarn = _timed(seam_compression, cell, seam_distance=d, strain=strain, steps=steps)
+    with heartbeat(f"yarn-level seam cell d = {d:g} mm under the punch, {steps} steps to {100 * strain:g} %"):
+        yarn, t_yarn = _timed(seam_compression, cell, seam_distance=d, strain=strain, steps=steps)
     prof = profiles[(d, None)]
     # the default pre-load law ("thread": released over the thread's slack travel) and its two limits
     laws = {}
@@ -325,7 +335,6 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
     s_y = yarn.stress.values
     keep = w_y >= 0
     w_y, s_y = w_y[keep], s_y[keep]
-    w_m, s_m = macro.plate_displacement.values, macro.stress.values
     sel = w_y <= strain * H0 + 1e-9
     s_law = {ps: np.interp(w_y, m.plate_displacement.values, m.stress.values) for ps, (m, _) in laws.items()}
     err_law = {ps: float(np.abs(v[sel] - s_y[sel]).max() / max(np.abs(s_y[sel]).max(), 1e-300))
@@ -358,34 +367,19 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
                     stitch_meets_punch_mm=w_hit, max_relative_error_before_stitch_contact=err_pre,
                     pre_stress=str(macro.attrs["pre_stress"]), slack_travel_mm=macro.attrs["slack_travel_mm"],
                     max_relative_error_held=err_law["held"], max_relative_error_released=err_law["released"])
+    # the macro curves at their own resolution and the unseamed curve, for the chart
+    tr = macro.plate_displacement.values
+    ds = ds.assign_coords(travel=("travel", tr, {"units": "mm", "long_name": "punch travel from 20 mm plate "
+                                                 "distance (macro curves' resolution)"}))
+    for ps, (m, _) in laws.items():
+        key = "stress_macro" if ps == "thread" else f"stress_macro_{ps}"
+        ds[f"{key}_curve"] = ("travel", m.stress.values, {**ds[key].attrs, "units": "kPa"})
+    ds["stress_unseamed_curve"] = ("travel", np.interp(tr / H0, np.r_[0.0, curve.strain.values],
+                                                       np.r_[0.0, curve.stress.values]),
+                                   {"units": "kPa", "long_name": "unseamed fabric (yarn level)"})
+    describe(ds, "seamed_vs_macro", cell)
     nc = _save(_attrs(ds, title=f"seamed d = {d:g} mm: yarn level vs macro layer"), out / "seamed_yarn_vs_macro.nc")
-    plt = _plt()
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
-    ax[0].plot(w_y, s_y, "o-", ms=3, label=f"yarn-level seam cell ({t_yarn:.1f} s)")
-    ax[0].plot(w_m, s_m, "-", label=f"macro cushion layer ({1e3 * t_macro:.1f} ms; thread slack after "
-               f"{float(macro.attrs['slack_travel_mm']):.2f} mm)")
-    for ps, ls in (("held", "--"), ("released", "-.")):
-        m = laws[ps][0]
-        ax[0].plot(m.plate_displacement.values, m.stress.values, ls, lw=0.8,
-                   label=f"macro, pre-load {ps} (error {100 * err_law[ps]:.0f} %)")
-    curve_w = curve.strain.values * H0
-    ax[0].plot(curve_w[curve_w <= strain * H0], curve.stress.values[curve_w <= strain * H0], ":", color="0.4",
-               label="unseamed (yarn level)")
-    ax[0].set(xlabel="punch travel from 20 mm, mm", ylabel="stress, kPa",
-              title=f"d = {d:g} mm: max error {100 * err:.1f} %, macro {t_yarn / t_macro:.0f}x faster")
-    ax[0].legend(fontsize=8)
-    ax[1].plot(w_y, ds.plate_contacts.values, "o-", ms=3, label="fabric-plate contacts")
-    ax[1].plot(w_y, ds.cushions_touched.values, "s-", ms=3, label="wale bins touching")
-    ax[1].set(xlabel="punch travel, mm", ylabel="count", title="the cushion meeting the punch (yarn level)")
-    ax[1].legend(fontsize=8)
-    fig.tight_layout()
-    png = out / "seamed_yarn_vs_macro.png"
-    if np.isfinite(w_hit):
-        ax[0].axvline(w_hit, color="tab:red", lw=0.8, ls=":")
-        ax[0].text(w_hit, 0.95 * ax[0].get_ylim()[1], " punch meets the stitch", fontsize=7, color="tab:red",
-                   va="top")
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    png = save(seamed_chart(ds), out / "seamed_yarn_vs_macro.png")
     summary = {"error": err, "error_pre": err_pre, "w_hit": w_hit, "yarn_seconds": t_yarn,
                "error_held": err_law["held"], "error_released": err_law["released"],
                "slack_travel": float(macro.attrs["slack_travel_mm"]),
@@ -408,14 +402,17 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
     rows = []   # (question, label, seconds, error)
     # A: unseamed
     ref_n = 6 if quick else 8
-    ref = compress(cell.replace(**{"resolution.elements_per_segment": ref_n}), strain=0.2, steps=4)
+    with heartbeat(f"speed-accuracy: reference curve at {ref_n} elements per segment"):
+        ref = compress(cell.replace(**{"resolution.elements_per_segment": ref_n}), strain=0.2, steps=4)
     rx, ry = ref.strain.values, ref.stress.values
     for n in ((1, 2, 3) if quick else (1, 2, 3, 4, 6)):
+        log.info("  speed-accuracy: unseamed curve at %d element(s) per segment", n)
         c = cell.replace(**{"resolution.elements_per_segment": n})
         ds, sec = _timed(compress, c, strain=0.2, steps=4)
         rows.append(("A unseamed to 20 %", f"yarn, {n} el/seg", sec, _curve_error(rx, ry, ds.strain.values,
                                                                                    ds.stress.values, 0.2)))
     for gtol in (1e-2, 1e-4):
+        log.info("  speed-accuracy: unseamed curve with contact gap tolerance %g mm", gtol)
         ds, sec = _timed(compress, cell, strain=0.2, steps=4, contact=Contact(gap_tol=gtol))
         rows.append(("A unseamed to 20 %", f"yarn, gap tol {gtol:g} mm", sec,
                      _curve_error(rx, ry, ds.strain.values, ds.stress.values, 0.2)))
@@ -435,7 +432,8 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
                  float(seamed_ref.attrs["yarn_seconds"]),
                  0.0))
     for steps in seamed_steps:
-        ds, sec = _timed(seam_compression, cell, seam_distance=d, strain=0.3, steps=steps)
+        with heartbeat(f"speed-accuracy: yarn-level seam cell, {steps} steps"):
+            ds, sec = _timed(seam_compression, cell, seam_distance=d, strain=0.3, steps=steps)
         w = ds.plate_displacement.values - (float(ds.attrs["thickness_mm"]) - H0)
         rows.append((label_b, f"yarn seam cell, {steps} steps", sec,
                      _curve_error(bx, by, w[w >= 0] / H0, ds.stress.values[w >= 0], 0.3)))
@@ -451,26 +449,9 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
                    "long_name": "max stress error / max reference stress over the range"}),
          "question": ("model", q, {"units": "1", "long_name": "question answered"})},
         coords={"model": [r[1] for r in rows]})
+    describe(ds, "speed_accuracy", cell, coords={"model": ("1", "model and its fidelity")})
+    ds["error"].attrs["definition"] = ("max |stress - reference| / max |reference stress| over the question's "
+                                       "range (0 < strain <= 20 % for A, 30 % for B); 0 for the references")
     nc = _save(_attrs(ds, title="speed against accuracy over model fidelities"), out / "speed_accuracy.nc")
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(8, 5))
-    for question, marker in (("A unseamed to 20 %", "o"), (label_b, "s")):
-        sel = [i for i, r in enumerate(rows) if r[0] == question]
-        ax.scatter([rows[i][2] for i in sel], [max(rows[i][3], 1e-6) for i in sel], marker=marker, label=question)
-        for i in sel:
-            ax.annotate(rows[i][1], (rows[i][2], max(rows[i][3], 1e-6)), fontsize=7, xytext=(4, 3),
-                        textcoords="offset points")
-    ax.axhline(0.10, color="0.6", lw=0.8, ls="--")
-    ax.set(xscale="log", yscale="log", xlabel="run time, s (2-core machine)", ylabel="relative error",
-           title="which model does a question need? (error floor 1e-6 drawn at the bottom)")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    png = out / "speed_accuracy.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    png = save(speed_accuracy_chart(ds), out / "speed_accuracy.png")
     return ds, {"speed vs accuracy (netCDF)": nc, "speed vs accuracy (chart)": png}
-
-
-# ----------------------------------------------------------------------------- main job
-
-

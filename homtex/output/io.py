@@ -15,7 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_netcdf", "sanitize_attrs", "write_netcdf"]
+__all__ = ["file_mode", "read_netcdf", "sanitize_attrs", "write_netcdf"]
+
+
+def file_mode() -> int:
+    """The mode a new file gets from ``open()`` under the process's umask (``0o666 & ~umask``)."""
+    umask = os.umask(0o022)   # read it (there is no getter) and put it back at once
+    os.umask(umask)
+    return 0o666 & ~umask
 
 
 def _attr_value(v):
@@ -53,7 +60,8 @@ def write_netcdf(ds, path) -> Path:
     """Write ``ds`` to ``path`` (netCDF4 engine) atomically; returns the path.
 
     The folder is created if needed. Object (string) variables are written as
-    variable-length strings. A failure leaves no partial file at ``path``.
+    variable-length strings. A failure leaves no partial file at ``path``. The file gets the
+    mode any new file of the user gets (``0o666 & ~umask``), not the temporary file's 0600.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -70,6 +78,7 @@ def write_netcdf(ds, path) -> Path:
     os.close(fd)
     try:
         out.to_netcdf(tmp, engine="netcdf4")
+        os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
         try:
