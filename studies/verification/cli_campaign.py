@@ -4,11 +4,12 @@ no traceback), tracebacks and internal errors (exit 3). A few correct invocation
 inputs (a cell named ``../outside/escaped``) check that the guards do not refuse good work and
 that nothing is written outside ``--out``.
 
-Usage: python studies/verification/cli_campaign.py [OUTDIR] [--quick]
-       (default results/verification/cli_campaign/; --quick: one invocation in four, about 2 min)
+Usage: python studies/verification/cli_campaign.py [--out DIR] [--quick]
+       (default results/cli_campaign/; --quick: one invocation in ten, under a minute)
 
-Writes OUTDIR/cli_campaign.nc (one row per invocation: command, expectation, exit status,
-outcome, seconds, the last line of stderr) and prints the tally and every failure.
+Writes DIR/cli_campaign.nc (one row per invocation: command, expectation, exit status,
+outcome, seconds, the last line of stderr) and DIR/cli_campaign.png (outcomes per subcommand),
+prints the tally and every failure; exits 1 if any invocation was not clean.
 """
 
 from __future__ import annotations
@@ -25,6 +26,9 @@ import xarray as xr
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))   # this checkout's homtex, whatever is installed
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+
 ERR, OK = "error", "ok"
 #: a shipped study file (studies/configs/ on newer trees)
 SQUARE = next((p for p in (ROOT / "studies" / "configs" / "square_stiffness.toml",
@@ -225,18 +229,37 @@ def run(argv, timeout=120):
     return rc, text, (lines[-1] if lines else "")[:400], time.perf_counter() - t0
 
 
+def chart(ds, path):
+    """Outcomes per subcommand, stacked bars."""
+    plt = pyplot()
+    sub = np.array([c.split()[1] if len(c.split()) > 1 else "(none)" for c in ds.command.values])
+    names = sorted(set(sub))
+    fig, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
+    bottom = np.zeros(len(names))
+    colours = {"clean error": "tab:green", "ok": "tab:blue", "traceback": "tab:red", "internal error": "tab:orange"}
+    for outcome in sorted(set(ds.outcome.values)):
+        n = np.array([np.sum((sub == s) & (ds.outcome.values == outcome)) for s in names])
+        ax.bar(names, n, bottom=bottom, label=outcome, color=colours.get(outcome, "tab:gray"))
+        bottom += n
+    ax.set_xlabel("homtex subcommand")
+    ax.set_ylabel("invocations (count)")
+    ax.set_title(f"homtex command-line campaign: {int(ds.attrs['invocations'])} invocations, "
+                 f"{int(ds.attrs['tracebacks'])} tracebacks")
+    ax.legend(title="outcome")
+    ax.tick_params(axis="x", rotation=30)
+    return save_figure(fig, path)
+
+
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    quick = "--quick" in argv
-    args = [a for a in argv if not a.startswith("--")]
-    outdir = Path(args[0]) if args else ROOT / "results" / "verification" / "cli_campaign"
-    outdir.mkdir(parents=True, exist_ok=True)
+    args = parser(__file__, __doc__).parse_args(argv)
+    quick = args.quick
+    outdir = setup(args)
     rows = []
     with tempfile.TemporaryDirectory(prefix="homtex-cli-campaign-") as tmpname:
         tmp = Path(tmpname)
         cases = invocations(_fixtures(tmp))
         if quick:
-            cases = cases[::4]
+            cases = cases[::10]
         for i, (label, cmd, expected) in enumerate(cases):
             rc, text, last, sec = run(cmd)
             outcome = classify(expected, rc, text)
@@ -260,9 +283,8 @@ def main(argv=None):
                     tracebacks=tally.get("traceback", 0), internal_errors=tally.get("internal error", 0),
                     clean_errors=tally.get("clean error", 0), escaped_files=", ".join(escaped) or "none",
                     **{f"outcome_{k.replace(' ', '_')}": v for k, v in tally.items()})
-    from homtex.output.io import write_netcdf
-
-    path = write_netcdf(ds, outdir / "cli_campaign.nc")
+    path = save_netcdf(ds, outdir / "cli_campaign.nc")
+    chart(ds, outdir / "cli_campaign.png")
     print(f"\n{len(rows)} invocations: " + ", ".join(f"{v} {k}" for k, v in tally.items())
           + f"; files outside --out: {ds.attrs['escaped_files']}")
     bad = [r for r in rows if r[4] not in ("clean error", "ok")]
