@@ -16,8 +16,9 @@ PSD contact and friction blocks, M a lumped diagonal of the beam tangent (frozen
 delta the pseudo-time step adapted by switched evolution relaxation (delta grows with the
 residual's decrease; it shrinks when the factor shows negative pivots or the line search
 cuts). PTC changes the path to an equilibrium, not the equilibrium: the converged state has a
-zero free residual. The energy the pseudo-viscous term absorbs, sum du^T M du / delta over the
-iterations, is recorded: small on smooth paths, large where the step jumps (snap-through).
+zero free residual. The energy the pseudo-viscous term absorbs at fixed prescribed motions,
+sum du^T M du / delta over the corrector iterations, is recorded: small on smooth paths, large
+where the state jumps at a fixed plate position (snap-through, a buckling leg).
 
 Every trial state is intersection-free: the step length is capped by the additive CCD of
 :mod:`.ccd` (yarn pairs, with the candidates searched again before a step can reach a pair
@@ -45,7 +46,7 @@ from ..analysis.corotational import PARALLEL_ELEMENTS, Corotational
 from ..errors import InputError, SolverError
 from ..fem.corotational_system import apply_increment
 from ..model.frame import Frame
-from ..model.scene import Plate, Scene
+from ..model.scene import Plate, Scene, parse_loads
 from .ccd import pair_step_bound, plate_step_bound
 from .ipc_scene import ContactScene, PlateState, friction_setup
 from .ipc_system import SystemMixin, _StepFailed, lag_change, serial_numba
@@ -67,7 +68,11 @@ class NonlinearSettings:
     forces below which the lag has settled. eta : CCD keeps each gap >= eta x its start.
     max_spin : largest nodal rotation per iteration, rad. delta0 : pseudo-time step at the
     first step (M / delta0 is added to the tangent); delta_max : largest one at a step's start.
-    armijo : sufficient-decrease constant of the line search.
+    armijo : sufficient-decrease constant of the line search. predictor_slip : while prescribed
+    motion is left, friction's Hessian saturates at this share of the largest prescribed
+    translation instead of eps_v (measured on the spacer cell with mu = 0.2 and the capstan:
+    0 (the stick stiffness) fails the capstan's sliding rope, 0.03-0.1 pass both, 1 makes the
+    spacer curve 2-3x slower).
     """
 
     tol: float = 1e-8
@@ -79,6 +84,7 @@ class NonlinearSettings:
     delta0: float = 1e12
     delta_max: float = 1e12
     armijo: float = 1e-4
+    predictor_slip: float = 0.1
 
 
 @dataclass
@@ -148,11 +154,12 @@ class IncrementalSolver(SystemMixin):
         self.mask = mask.ravel()
         self.free = np.flatnonzero(~self.mask)
         self.ubar = np.where(sc.mask, sc.values, 0.0).reshape(n, 6)
-        self.has_ubar = bool(np.any(self.ubar != 0.0))
         self.f_loads = sc.loads.reshape(n, 6)
         self.plate_force = np.array([p.normal * p.force if p.force_controlled else 0.0 for p in sc.plates])
         self.cor = Corotational(frame, geometric="consistent")
-        self.lam = 0.0
+        self.motion = 0.0
+        self.presc = np.zeros((n, 6))          # current values of the prescribed DOFs (mm, rad)
+        self.load_scale = 0.0
         self.prestrain_scale = 1.0
         self.delta = self.s.delta0
         self.small = frame.n_elements < PARALLEL_ELEMENTS
@@ -177,8 +184,13 @@ class IncrementalSolver(SystemMixin):
         return self.plates.z.copy()
 
     def snapshot(self):
-        return (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy(), self.lam, self.prestrain_scale,
-                self.delta, self.plate_force.copy())
+        return (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy(), self.motion, self.prestrain_scale,
+                self.delta, self.plate_force.copy(), self.load_scale, self.presc.copy())
+
+    def set_loads(self, loads) -> None:
+        """Replace the dead loads (dict node -> (Fx, Fy, Fz, Mx, My, Mz), N and N mm, scaled by the
+        load factor) from the next step on."""
+        self.f_loads = parse_loads(loads, self.n).reshape(self.n, 6)
 
     def checkpoint(self):
         """State and energy ledger, to hand back to :meth:`rollback` (undo accepted steps)."""
@@ -194,15 +206,21 @@ class IncrementalSolver(SystemMixin):
         self.cor.ut[...] = snap[0]
         self.cor.Q[...] = snap[1]
         self.plates.z[...] = snap[2]
-        self.lam, self.prestrain_scale, self.delta = snap[3], snap[4], snap[5]
+        self.motion, self.prestrain_scale, self.delta = snap[3], snap[4], snap[5]
         self.plate_force[...] = snap[6]
+        self.load_scale = snap[7]
+        self.presc[...] = snap[8]
 
     # ------------------------------------------------------------------ public step
-    def solve(self, *, lam: float | None = None, plate_z=None, plate_force=None,
-              prestrain_scale: float | None = None) -> StepInfo:
+    def solve(self, *, motion: float | None = None, loads: float | None = None, plate_z=None, plate_force=None,
+              prestrain_scale: float | None = None, prescribed: dict | None = None) -> StepInfo:
         """Take the state to equilibrium at the given levels; SolverError leaves it unchanged.
+        Levels not given keep their current values (all start at 0; the pre-strain scale at 1).
 
-        lam : load factor of the loads and prescribed support motions. plate_z : {plate: height}
+        motion : factor on the prescribed support values of ``fixed`` (mm, rad: rotations are
+        spins about the fixed axes). prescribed : {node: {dof: value}} values of supported DOFs at
+        the end of this step (mm, rad), overriding ``motion`` for them (paths that are not
+        straight). loads : factor on the dead loads. plate_z : {plate: height}
         (or (P,) array, NaN for force-controlled ones) of displacement-controlled plates, mm.
         plate_force : {plate: force pressing it on the yarns} of force-controlled plates, N.
         prestrain_scale : factor on the frame's pre-strain.
@@ -225,9 +243,19 @@ class IncrementalSolver(SystemMixin):
                     self.plate_force[p] = self.plates.normal[p] * float(v)
             if prestrain_scale is not None:
                 self.prestrain_scale = float(prestrain_scale)
-            lam_t = self.lam if lam is None else float(lam)
+            target = self.presc.copy()
+            if motion is not None:
+                self.motion = float(motion)
+                target = np.where(self.mask[:6 * self.n].reshape(self.n, 6), self.motion * self.ubar, 0.0)
+            for node, spec in (prescribed or {}).items():
+                for dof, v in spec.items():
+                    if not self.mask[6 * node + dof]:
+                        raise InputError(f"prescribed: node {node} DOF {dof} is not supported (give it in fixed)")
+                    target[node, dof] = float(v)
+            if loads is not None:
+                self.load_scale = float(loads)
             with serial_numba(self.small):
-                info = self._step(lam_t, target_z)
+                info = self._step(target, target_z)
                 self._account(info, snap)
         except (_StepFailed, SolverError, FloatingPointError, np.linalg.LinAlgError) as err:
             self.restore(snap)
@@ -235,18 +263,16 @@ class IncrementalSolver(SystemMixin):
         return info
 
     # ------------------------------------------------------------------ the step
-    def _step(self, lam_t: float, target_z: np.ndarray) -> StepInfo:
+    def _step(self, target_u: np.ndarray, target_z: np.ndarray) -> StepInfo:
         self.info = info = StepInfo()
         x_start = self.positions.copy()
         z_start = self.plates.z.copy()
         self.delta = min(self.delta, self.s.delta_max)
         self.M = None
-        if not self.has_ubar:
-            self.lam = lam_t
         lag = self.scene.friction_lag(x_start, z_start)
         rounds = self.s.friction_rounds if self.scene.has_friction else 1
         for rnd in range(rounds):
-            self._newton(lam_t, target_z, x_start, lag)
+            self._newton(target_u, target_z, x_start, lag)
             info.friction_rounds = rnd + 1
             used = lag
             if not self.scene.has_friction:
@@ -265,27 +291,26 @@ class IncrementalSolver(SystemMixin):
         info.extra.update(ev=ev, x_start=x_start)
         return info
 
-    def _remaining(self, lam_t, target_z) -> np.ndarray:
+    def _remaining(self, target_u, target_z) -> np.ndarray:
         d = np.zeros((self.N, 6))
-        if self.has_ubar and lam_t != self.lam:
-            d[:self.n] = (lam_t - self.lam) * self.ubar
+        d[:self.n] = target_u - self.presc
         d[self.n:, 2] = np.where(self.plates.force_controlled, 0.0, target_z - self.plates.z)
         return d
 
     def _converged(self, ev, rn) -> bool:
         fc = ev["g_contact"]
         ref = max(float(np.linalg.norm(ev["fint"])), float(np.linalg.norm(fc)),
-                  float(np.linalg.norm(self.lam * self.f_loads)), float(np.linalg.norm(self.plate_force)))
+                  float(np.linalg.norm(self.load_scale * self.f_loads)), float(np.linalg.norm(self.plate_force)))
         floor = 1e-12 * float(np.max(self.frame.EA))
         return rn <= self.s.tol * ref + floor
 
-    def _newton(self, lam_t, target_z, x_start, lag) -> None:
+    def _newton(self, target_u, target_z, x_start, lag) -> None:
         s, info = self.s, self.info
         lag = [lg for lg in lag if lg is not None]
         r_prev = None
         for it in range(1, s.max_iter + 1):
             ev = self._evaluate(x_start, lag, hessian=True)
-            rem = self._remaining(lam_t, target_z)
+            rem = self._remaining(target_u, target_z)
             g = ev["g"].ravel()
             rn = float(np.linalg.norm(g[self.free]))
             if not np.isfinite(rn) or not np.isfinite(ev["Pi"]):
@@ -297,9 +322,14 @@ class IncrementalSolver(SystemMixin):
             r_prev = rn
             # the exact Hessian where it is positive definite (Newton converges quadratically);
             # else the PSD-projected contact blocks and, if still needed, a smaller delta
+            # a predictor (prescribed motion left) mobilises friction over the slip of the step: its
+            # stick stiffness at eps_v would hold every contact, and most of them slide over the step
+            eps_h = self.s.predictor_slip * float(np.abs(rem[:, :3]).max(initial=0.0)) if presc else 0.0
+            if eps_h > self.eps_v and self.scene.has_friction:
+                ev = self._evaluate(x_start, lag, hessian=True, eps_hessian=eps_h)
             self._assemble(ev)
             if not self._factor(it, shrink=False):
-                ev = self._evaluate(x_start, lag, hessian=True, project=True)
+                ev = self._evaluate(x_start, lag, hessian=True, project=True, eps_hessian=eps_h)
                 self._assemble(ev)
                 self._factor(it)
                 info.projected += 1
@@ -316,12 +346,16 @@ class IncrementalSolver(SystemMixin):
                       alpha, self.delta, float(np.abs(d[:self.n, :3]).max(initial=0.0)), ev["pairs"].n_active,
                       len(ev["plates"]["active"]))
             df = du[self.free] * alpha
-            info.stabilization += float(df @ (self.M * df)) / self.delta
+            if not presc:
+                # the damping work at fixed prescribed motions: energy the pseudo-viscous term takes
+                # out while the state relaxes to equilibrium (while the plates move, it only slows
+                # the motion they drive)
+                info.stabilization += float(df @ (self.M * df)) / self.delta
             info.iterations += 1
             if presc:
-                self.lam += alpha * (lam_t - self.lam) if self.has_ubar else 0.0
+                self.presc += min(alpha, 1.0) * (target_u - self.presc)
                 if alpha >= 1.0:
-                    self.lam = lam_t
+                    self.presc[...] = target_u
                     self.plates.z[~self.plates.force_controlled] = target_z[~self.plates.force_controlled]
         raise _StepFailed(f"did not converge in {s.max_iter} iterations (out-of-balance force {r_prev:.3e})")
 
@@ -351,14 +385,16 @@ class IncrementalSolver(SystemMixin):
                                                 eta=s.eta))
         if a < amax:
             info.ccd_limited += 1
-        if a <= 0.0:
-            raise _StepFailed(f"the collision-free step length is zero at iteration {it}")
+        if a <= 0.0 or (a < 1e-6 and self._stuck()):
+            raise _StepFailed(f"the prescribed motion cannot go on without an overlap at iteration {it} (the "
+                              f"collision-free step is {a:.2g}: plates closer than a yarn's diameter, or supports "
+                              "pushing a yarn through another)")
         g = ev["g"]
         free = self.free
         slope = float(g.ravel()[free] @ d.ravel()[free])
         base = (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy())
         Pi0 = ev["Pi"]
-        ext = float(np.sum(self.lam * self.f_loads * d[:self.n])) + float(self.plate_force @ dz)
+        ext = float(np.sum(self.load_scale * self.f_loads * d[:self.n])) + float(self.plate_force @ dz)
         for _ in range(40):
             self._apply(a, d)
             if presc:
@@ -372,6 +408,17 @@ class IncrementalSolver(SystemMixin):
             a *= 0.5
             info.cuts += 1
         raise _StepFailed(f"the line search found no decrease at iteration {it}")
+
+    def _stuck(self) -> bool:
+        """True when a gap is down to 1e-6 of ghat (the barrier cannot hold it any closer)."""
+        x = self.positions
+        g = self.scene.plate_gaps(x, self.plates.z)
+        gmin = float(g.min(initial=np.inf))
+        if len(self.scene.stencil):
+            from .potential import pair_gaps
+
+            gmin = min(gmin, float(pair_gaps(x, self.scene.stencil).min()))
+        return gmin < 1e-6 * self.ghat
 
     def _adapt(self, df, alpha, dPi, slope, Pi0) -> None:
         """Pseudo-time step from the quality of the quadratic model (as a Levenberg-Marquardt

@@ -76,9 +76,11 @@ class SystemMixin:
         self.info.searches += 1
 
     # ------------------------------------------------------------------ potential
-    def _evaluate(self, x_start, lag, hessian: bool, project: bool = False) -> dict:
+    def _evaluate(self, x_start, lag, hessian: bool, project: bool = False, eps_hessian: float = 0.0) -> dict:
         """Forces, energies and (hessian) blocks at the current state; gradient g (N, 6).
-        ``project``: contact and friction blocks projected to PSD (else their exact Hessians)."""
+        ``project``: contact and friction blocks projected to PSD (else their exact Hessians).
+        ``eps_hessian``: friction blocks for this saturation slip if it is larger than the
+        model's (a predictor: friction is mobilised over the slip of the step, not eps_v)."""
         s = self.prestrain_scale
         fint = self.cor.evaluate_tangent(s) if hessian else self.cor.evaluate(s)
         x = self.positions
@@ -95,12 +97,14 @@ class SystemMixin:
             if lg is None or not len(lg):
                 continue
             fr = friction_potential(lg, x, x_start, self.eps_v, hessian=hessian, project=project)
+            if hessian and eps_hessian > self.eps_v:
+                fr.hess = friction_potential(lg, x, x_start, eps_hessian, hessian=True, project=project).hess
             ev["D"] += fr.energy
             ev["fric"].append((lg, fr))
             g[:self.n, :3] += fr.grad
         ev["g_contact"] = g[:, :3].copy()
         ev["g_contact"][:self.n] -= fint[:, :3]
-        g[:self.n] -= self.lam * self.f_loads
+        g[:self.n] -= self.load_scale * self.f_loads
         g[self.n:, 2] -= self.plate_force
         ev["g"] = g
         ev["Pi"] = ev["U"] + ev["B"] + ev["D"]
@@ -115,7 +119,8 @@ class SystemMixin:
         pc, pl = ev["pairs"], ev["plates"]
         # slots first: a block outside the pattern rebuilds it (and the beam part with it)
         slots = [self._slots(pc.hess_nodes) if pc.n_active else None]
-        slots += [self._friction_slots(lg) for lg, _ in ev["fric"]]
+        fric = ev["fric"]
+        slots += [self._friction_slots(lg) for lg, _ in fric]
         if self.sys is not sys:
             sys = self.sys
             sys.assemble(self.cor.Ke)
@@ -123,7 +128,7 @@ class SystemMixin:
             sys.add_blocks(pc.hess, slots[0])
         if len(pl["active"]):
             sys.add_blocks(pl["blocks"], self.plate_slots[pl["active"]])
-        for (lg, fr), sl in zip(ev["fric"], slots[1:]):
+        for (lg, fr), sl in zip(fric, slots[1:]):
             sys.add_blocks(fr.hess, sl)
 
     def _friction_slots(self, lg):
@@ -193,10 +198,10 @@ class SystemMixin:
     def _reactions(self, ev) -> np.ndarray:
         """(N, 6) forces the surroundings apply on prescribed DOFs and loaded DOFs (N, N mm)."""
         g = ev["g"].copy()
-        g[:self.n] += self.lam * self.f_loads
+        g[:self.n] += self.load_scale * self.f_loads
         g[self.n:, 2] += self.plate_force
         r = np.where(self.mask.reshape(self.N, 6), g, 0.0)
-        r[:self.n] += self.lam * self.f_loads
+        r[:self.n] += self.load_scale * self.f_loads
         r[self.n:, 2] += self.plate_force
         return r
 

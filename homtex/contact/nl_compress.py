@@ -133,7 +133,8 @@ class _Curve:
 
     def advance(self, level: float, depth: int, max_cuts: int):
         """Reach ``level`` from the current one; halve a step that fails or that the
-        stabilisation dominates (up to ``max_cuts`` levels deep)."""
+        stabilisation dominates (up to ``max_cuts`` levels deep). A jump that halving does not
+        resolve (the halves fail) is taken as the single step that passed."""
         L = self.sol.ledger
         before = dict(L)
         cp = self.sol.checkpoint()
@@ -146,16 +147,24 @@ class _Curve:
         d = {k: L[k] - before[k] for k in L}
         dw = d["external_work"] + d["prestrain_work"]
         rest = dw - d["strain_energy"] - d["contact_energy"] - d["dissipation"] - d["stabilization"]
+        self._accepted(info)
         if depth < max_cuts and max(d["stabilization"], abs(rest)) > self.refine * max(abs(dw), 1e-300):
             # the step jumped (buckling, snap-through) or is too coarse for the work it does
             # (its trapezoidal work misses its energy change): take it again in halves
-            self.sol.rollback(cp)
-            return self._halves(level, depth, max_cuts)
+            done = self.sol.checkpoint()
+            self.sol.rollback(cp)          # self.level is still the step's start
+            try:
+                return self._halves(level, depth, max_cuts)
+            except SolverError:
+                self.sol.rollback(done)
+                self.level = level
         self.level = level
+        return info
+
+    def _accepted(self, info):
         self.acc["it"] += info.iterations
         self.acc["fact"] += info.iterations + info.projected + 1
         self.acc["sub"] += 1
-        return info
 
     def _halves(self, level, depth, max_cuts):
         mid = 0.5 * (self.level + level)
