@@ -125,6 +125,7 @@ class _Curve:
         self.rows = {k: [] for k in ("strain", *META, "group_energy")}
         self.level = 0.0
         self.acc = {"it": 0, "fact": 0, "sub": 0}
+        self.history = []            # (top plate height, pile force) of every accepted step
 
     def _solve(self, level: float):
         if self.control == "displacement":
@@ -138,6 +139,7 @@ class _Curve:
         L = self.sol.ledger
         before = dict(L)
         cp = self.sol.checkpoint()
+        n0 = len(self.history)
         try:
             info = self._solve(level)
         except SolverError:
@@ -151,17 +153,21 @@ class _Curve:
         if depth < max_cuts and max(d["stabilization"], abs(rest)) > self.refine * max(abs(dw), 1e-300):
             # the step jumped (buckling, snap-through) or is too coarse for the work it does
             # (its trapezoidal work misses its energy change): take it again in halves
-            done = self.sol.checkpoint()
+            done, coarse = self.sol.checkpoint(), self.history[n0:]
             self.sol.rollback(cp)          # self.level is still the step's start
+            del self.history[n0:]
             try:
                 return self._halves(level, depth, max_cuts)
             except SolverError:
                 self.sol.rollback(done)
+                self.history[n0:] = coarse
                 self.level = level
         self.level = level
         return info
 
     def _accepted(self, info):
+        N = self.sol.cor.forces[:, 6]
+        self.history.append((self.sol.plates.z[1], float(max(0.0, -N[self.pile].min())) if self.pile.any() else 0.0))
         self.acc["it"] += info.iterations
         self.acc["fact"] += info.iterations + info.projected + 1
         self.acc["sub"] += 1
@@ -212,6 +218,14 @@ class _Curve:
             r[k].append(float(E[:, j].sum()))
         tot = E.sum(axis=1)
         r["group_energy"].append([float(tot[mk].sum()) for mk in self.masks])
+
+
+def _buckling(cv, test) -> float:
+    """First buckling strain from every accepted step (finer than the reported levels)."""
+    if not cv.history:
+        return float("nan")
+    h = np.array(cv.history)
+    return first_buckling_strain((cv.z0 - h[:, 0]) / test.H0, h[:, 1])
 
 
 def _checks(ds) -> str:
@@ -280,7 +294,7 @@ def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, 
                          else "cell file [contact] table"),
         initial_touching_pairs=sol.scene.initial_touching, supports=str(test.fixed),
         steps_requested=int(len(targets)), refine=float(refine), max_cuts=int(max_cuts),
-        first_buckling_strain=first_buckling_strain(ds["strain"].values, ds["pile_force"].values),
+        first_buckling_strain=_buckling(cv, test),
         first_buckling_criterion="the most compressed pile element's axial force has lost half of its initial "
                                  "stiffness (d F / d strain <= 0.5 x its first value)",
         seconds=time.perf_counter() - t0, searches=int(sol.scene.searches))
