@@ -250,13 +250,15 @@ def _checks(ds) -> str:
 
 def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, friction_spec: dict | None = None,
                               max_cuts: int = 4, progress: bool = False, settings: NonlinearSettings | None = None,
-                              refine: float = 0.01) -> xr.Dataset:
+                              refine: float = 0.01, keep_positions: bool = False) -> xr.Dataset:
     """The compression curve of ``test`` (:class:`~homtex.contact.compress.CompressionTest`) through
     the levels ``targets`` (strains, or kPa under force control) with the large-motion engine.
 
     ``refine``: a step is redone in halves while its stabilisation absorbs more than this share
-    of the work done on it (up to ``max_cuts`` levels). Returns the Dataset described in the
-    module docstring.
+    of the work done on it (up to ``max_cuts`` levels). ``keep_positions``: also return the node
+    positions ``x`` (strain, node, xyz; mm), the plate heights ``plate_z`` and the strain energy
+    of every element ``element_energy`` (strain, element; N mm) at every level (pictures, VTK).
+    Returns the Dataset described in the module docstring.
     """
     t0 = time.perf_counter()
     cv = _Curve(test, contact, control, friction_spec, settings, refine)
@@ -272,6 +274,10 @@ def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, 
             log.warning("compress: %s", detail)
             break
         cv.record(info, float(target))
+        if keep_positions:
+            cv.rows.setdefault("x", []).append(cv.sol.positions.copy())
+            cv.rows.setdefault("plate_z", []).append(cv.sol.plates.z.copy())
+            cv.rows.setdefault("element_energy", []).append(cv.sol.cor.energy.sum(axis=1))
         bar.step(f"{cv.rows['substeps'][-1]} sub-steps" if cv.rows["substeps"][-1] > 1 else "")
     bar.close()
     rows = cv.rows
@@ -282,6 +288,16 @@ def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, 
         ge = np.asarray(rows["group_energy"], dtype=float).reshape(n, len(cv.names))
         data["group_energy"] = (("strain", "group"), ge, "N mm", "strain energy per element group")
         coords["group"] = (np.array(cv.names, dtype=str), "1", "element group")
+    if keep_positions:
+        m = test.frame.n_elements
+        data["x"] = (("strain", "node", "xyz"), np.asarray(rows.get("x", []), dtype=float).reshape(n, -1, 3), "mm",
+                     "node positions")
+        data["plate_z"] = (("strain", "plate"), np.asarray(rows.get("plate_z", []), dtype=float).reshape(n, 2), "mm",
+                           "plate heights (bottom, top)")
+        data["element_energy"] = (("strain", "element"), np.asarray(rows.get("element_energy", []),
+                                                                    dtype=float).reshape(n, m), "N mm",
+                                  "strain energy of every element")
+        coords["xyz"] = (np.array(["x", "y", "z"]), "1", "coordinate")
     ds = curve_dataset(data, coords)
     sol = cv.sol
     ds.attrs.update(
