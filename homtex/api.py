@@ -57,14 +57,15 @@ def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str | None = N
 
 def _frame_of(obj):
     if isinstance(obj, Frame):
-        return obj, None, {}
+        return obj, None, {}, None
     fr = getattr(obj, "frame", None)
     if not isinstance(fr, Frame):
         raise InputError(f"compress needs a homtex.Frame or an object with a .frame (a homtex Cell), "
                          f"got {type(obj).__name__}")
     groups = getattr(obj, "groups", None)
     info = getattr(obj, "info", None) or {}
-    return fr, groups, info
+    spec = getattr(obj, "friction_spec", None)
+    return fr, groups, info, spec
 
 
 def _targets(v, steps, name):
@@ -85,7 +86,7 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
              area: float | None = None, solver: str | None = None, tol: float | None = None,
              maxiter: int | None = None, max_cuts: int = 4, progress: bool | None = None, geometry: str = "linear",
              stabilize: float = 0.0) -> xr.Dataset:
-    """Compression curve of a cell between two rigid frictionless plates.
+    """Compression curve of a cell between two rigid plates.
 
     Parameters
     ----------
@@ -97,7 +98,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     steps : number of equal steps up to ``strain`` (or ``pressure``).
     control : "displacement" (the top plate moves) or "force" (uniform ``pressure`` on it).
     pressure : final pressure (kPa) or an increasing array (force control).
-    contact : Contact options (default ``Contact()``: pdas, augmented Lagrangian).
+    contact : Contact options (default ``Contact()``: pdas, augmented Lagrangian; with
+        ``geometry="nonlinear"`` the barrier and friction options: ``Contact(friction=0.3)``).
     fixed : extra supports (dict as in ``solve_static``); default pins the in-plane rigid
         motions that frictionless plates leave free (ux, uy of the lowest node for a 2-periodic
         frame; plus one in-plane DOF against rotation about z for a finite frame).
@@ -111,21 +113,27 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
         1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
     progress : show a progress bar (default: option ``progress``).
-    geometry : "linear" (small rotations; contact re-linearised per step) or "nonlinear"
-        (co-rotational beams, Newton iterations per step: yarns may rotate and buckle; the
-        large-compression regime the linear model does not reach).
-    stabilize : viscous stabilisation of the nonlinear steps (see
-        :func:`homtex.contact.newton.newton_contact`); its largest force is recorded per step.
+    geometry : "linear" (small rotations, frictionless; contact re-linearised per step) or
+        "nonlinear" (the large-motion engine, :mod:`homtex.contact.nl_compress`: co-rotational
+        beams, IPC barrier contact that no yarn passes through, lagged Coulomb friction from
+        ``contact.friction`` or the cell file's ``[contact]`` table, pseudo-transient
+        continuation through buckling; yarns may rotate, buckle and slide).
+    stabilize : must be 0 (the viscous stabilisation of the former co-rotational contact solve;
+        the large-motion engine stabilises itself and records what that absorbs).
 
     Returns
     -------
     xarray.Dataset over ``strain`` (compression positive) with stress (kPa), force (N),
     plate_displacement (mm), active contacts (total, yarn-yarn, yarn-plate), max penetration
-    (mm), contact iterations, linear solves, energies (N mm) and, with groups, ``group_energy``.
+    (mm), contact iterations, linear solves, energies (N mm) and, with groups, ``group_energy``;
+    with ``geometry="nonlinear"`` also ``external_work``, ``strain_energy``, ``contact_energy``,
+    ``friction_energy``, ``stabilization_energy`` (N mm), ``energy_balance``, ``min_gap``,
+    ``pile_force`` and ``attrs["first_buckling_strain"]``.
     A failing step ends the curve: the steps before it are kept, ``attrs["status"]`` is
-    "failed" and ``attrs["status_detail"]`` says why ("ok" otherwise).
+    "failed" and ``attrs["status_detail"]`` says why ("ok" otherwise; "flagged" for a complete
+    nonlinear curve whose stabilisation or energy balance exceeds 1 % of the external work).
     """
-    frame, groups, info = _frame_of(cell_or_frame)
+    frame, groups, info, spec = _frame_of(cell_or_frame)
     check_choice(control, "control", ("displacement", "force"))
     contact = Contact() if contact is None else contact
     if not isinstance(contact, Contact):
@@ -133,6 +141,15 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     steps = check_int(steps, "steps", ge=1, le=100_000)
     check_choice(geometry, "geometry", GEOMETRIES)
     stabilize = check_number(stabilize, "stabilize", ge=0.0, lt=1.0)
+    if stabilize != 0.0:
+        raise InputError(f"stabilize = {stabilize!r}: the viscous stabilisation of the former co-rotational contact "
+                         "solve is gone; geometry='nonlinear' stabilises itself (pseudo-transient continuation, its "
+                         "absorbed energy recorded) - leave stabilize at 0")
+    friction_spec = None
+    if geometry == "linear":
+        contact.require_frictionless("compress(geometry='linear')")
+    elif callable(spec) and contact.friction is None:
+        friction_spec = spec()
     max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=30)
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
         raise InputError(f"progress must be True or False, got {progress!r}")
@@ -159,4 +176,4 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         targets = _targets(pressure, steps, "pressure")
     return run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
                            tol=option("tol", tol), maxiter=maxiter, max_cuts=int(max_cuts),
-                           progress=option("progress", progress), geometry=geometry, stabilize=float(stabilize))
+                           progress=option("progress", progress), geometry=geometry, friction_spec=friction_spec)

@@ -21,6 +21,12 @@ Schema::
     source = "where the numbers come from"
     [resolution]
     elements_per_strut = 4         # generator-specific keys
+    [contact]                      # optional: Coulomb friction of the large-motion engine
+    friction = 0.2                 # every contact, yarn-yarn and yarn-plate (default 0)
+    plate_friction = 0.3           # yarn-plate contacts (default: friction)
+    [contact.pairs]                # particular pairs of yarn types (either order; "plate" = the plates)
+    monofilament.multifilament = 0.25
+    monofilament.plate = 0.35
 
 A generator is a function ``build(parameters, yarns, resolution) -> Frame`` or
 ``-> (Frame, info)`` named in :data:`GENERATORS` as ``"module:function"`` (imported
@@ -63,7 +69,10 @@ GENERATORS: dict[str, str] = {
     "spacer": "homtex.geometry.spacer:build_cell",
 }
 
-TABLES = ("cell", "parameters", "yarns", "resolution")
+TABLES = ("cell", "parameters", "yarns", "resolution", "contact")
+CONTACT_KEYS = ("friction", "plate_friction", "pairs")
+#: largest friction coefficient a cell file may give
+MAX_FRICTION = 10.0
 CELL_KEYS = ("name", "generator", "description")
 YARN_KEYS = ("section", "radius", "semi_axes", "E", "nu", "contact_radius", "source", "bending_factor",
              "torsion_factor", "strain_limit")
@@ -98,6 +107,38 @@ def _yarn(name: str, d: dict) -> YarnType:
     return YarnType(name=name, radius=float(radius), E=E, nu=nu, contact_radius=rc,
                     semi_axes=semi, source=source, bending_factor=float(bf), torsion_factor=float(tf),
                     strain_limit=float(sl))
+
+
+def _contact(d: dict, yarns: dict) -> dict:
+    """The validated ``[contact]`` table: friction coefficients (see the module docstring)."""
+    if not d:
+        return {}
+    check_keys(d, CONTACT_KEYS, "contact")
+    out = {}
+    for key in ("friction", "plate_friction"):
+        v = get_number(d, key, "contact", ge=0.0, le=MAX_FRICTION, required=False)
+        if v is not None:
+            out[key] = v
+    pairs = get_table(d, "pairs", "contact", required=False)
+    seen: dict = {}
+    for a, row in pairs.items():
+        table = f"contact.pairs.{a}"
+        if a not in yarns:
+            raise CellError(f"unknown yarn type {a!r} (yarn types: {', '.join(yarns)}; 'plate' only as the second "
+                            "name)", table="contact.pairs", key=a)
+        row = get_table(pairs, a, "contact.pairs")
+        for b in row:
+            if b not in yarns and b != "plate":
+                raise CellError(f"unknown yarn type {b!r} (yarn types: {', '.join(yarns)}, or 'plate')",
+                                table=table, key=b)
+            v = get_number(row, b, table, ge=0.0, le=MAX_FRICTION)
+            key = tuple(sorted((a, b))) if b != "plate" else (a, b)
+            if key in seen and seen[key] != v:
+                raise CellError(f"the pair {a}/{b} is given twice with different coefficients ({seen[key]:g} and "
+                                f"{v:g})", table=table, key=b)
+            seen[key] = v
+            out.setdefault("pairs", {}).setdefault(a, {})[b] = v
+    return out
 
 
 def _resolve(generator: str, file):
@@ -137,7 +178,7 @@ class Cell:
             for key in data:
                 if key not in TABLES:
                     raise CellError(f"unknown table [{key}]; a cell file has [cell], [parameters], "
-                                    f"[yarns.<name>] and [resolution]", table=key)
+                                    f"[yarns.<name>], [resolution] and [contact]", table=key)
             cell = get_table(data, "cell", "")
             check_keys(cell, CELL_KEYS, "cell")
             self.name = get_str(cell, "name", "cell")
@@ -149,6 +190,7 @@ class Cell:
                 raise CellError("at least one [yarns.<name>] table is required", table="yarns")
             self.yarns = {name: _yarn(name, d) for name, d in yarns.items()}
             self.resolution = copy.deepcopy(get_table(data, "resolution", "", required=False))
+            self.contact = _contact(get_table(data, "contact", "", required=False), self.yarns)
         except CellError as err:
             err.file = err.file or f
             raise
@@ -205,6 +247,41 @@ class Cell:
     def groups(self) -> dict:
         return self.info["groups"]
 
+    def friction_spec(self) -> dict | None:
+        """The friction of the cell file's ``[contact]`` table as arrays, or None without one.
+
+        Returns {"types": (m,) int yarn-type index of every element, "names": the yarn-type
+        names, "table": (T, T) coefficients between yarn types, "plate": (T,) coefficients
+        against the plates}. Elements get their yarn type from the generator (``info["yarn_type"]``,
+        {yarn id: type name}); a cell with a single yarn type needs no mapping.
+        """
+        if not self.contact:
+            return None
+        names = list(self.yarns)
+        T = len(names)
+        d = self.contact
+        mu = float(d.get("friction", 0.0))
+        table = np.full((T, T), mu)
+        plate = np.full(T, float(d.get("plate_friction", mu)))
+        for a, row in d.get("pairs", {}).items():
+            for b, v in row.items():
+                if b == "plate":
+                    plate[names.index(a)] = v
+                else:
+                    table[names.index(a), names.index(b)] = table[names.index(b), names.index(a)] = v
+        frame = self.frame
+        ytype = self.info.get("yarn_type")
+        if ytype is None:
+            if T != 1:
+                raise CellError(f"friction per yarn type needs the yarn type of every element, and generator "
+                                f"{self.generator!r} does not give it (info['yarn_type']); use one yarn type or a "
+                                "single [contact] friction", file=self.path, table="contact")
+            types = np.zeros(frame.n_elements, dtype=np.int64)
+        else:
+            lut = {int(k): names.index(v) for k, v in ytype.items()}
+            types = np.array([lut[int(y)] for y in frame.yarn], dtype=np.int64)
+        return {"types": types, "names": names, "table": table, "plate": plate}
+
     # ------------------------------------------------------------------
     def to_dict(self) -> dict:
         """The cell's data as nested dicts (as read from the file, with replacements)."""
@@ -217,6 +294,7 @@ class Cell:
         data = copy.deepcopy(self._data)
         data.pop("cell", None)
         data.get("parameters", {}).pop("seam", None)
+        data.pop("contact", None)             # friction is not what a layer rigidity was calibrated on
         for y in data.get("yarns", {}).values():
             if isinstance(y, dict):
                 y.pop("source", None)

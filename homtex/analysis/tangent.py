@@ -29,7 +29,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import SolverError
-from ..fem.corotational_system import scatter_free, sym_upper_matvec
+from ..fem.corotational_system import add_blocks, scatter_free, sym_upper_matvec
 from ..linalg.solvers import blas_single_thread
 
 try:
@@ -47,8 +47,23 @@ one_blas_thread = blas_single_thread
 METHODS = ("ldl", "lu")
 
 
-def _slots(frame, fidx, upper: bool):
-    """CSC pattern (indptr, indices) of the free-DOF matrix and the slot of every element entry."""
+def _coupling_entries(couplings, fidx):
+    """(rows, cols) of the free-DOF entries of the translational 3 x 3 blocks between node pairs
+    ``couplings`` (p, 2) (both orders and both diagonal blocks)."""
+    cp = np.asarray(couplings, dtype=np.int64).reshape(-1, 2)
+    ar = np.arange(3)
+    ga = (6 * cp[:, :1] + ar)                                   # (p, 3)
+    gb = (6 * cp[:, 1:] + ar)
+    g = np.concatenate([ga, gb], axis=1)                        # (p, 6)
+    fg = fidx[g]
+    r = np.broadcast_to(fg[:, :, None], (len(cp), 6, 6)).ravel()
+    c = np.broadcast_to(fg[:, None, :], (len(cp), 6, 6)).ravel()
+    return r, c
+
+
+def _slots(frame, fidx, upper: bool, couplings=None):
+    """CSC pattern (indptr, indices) of the free-DOF matrix, the slot of every element entry and
+    the sorted entry keys (column * nf + row) of the pattern."""
     el = frame.elements
     ar = np.arange(6)
     g = np.concatenate([6 * el[:, :1] + ar, 6 * el[:, 1:] + ar], axis=1)       # (m, 12)
@@ -61,14 +76,19 @@ def _slots(frame, fidx, upper: bool):
     nf = int(fidx.max()) + 1 if fidx.size and fidx.max() >= 0 else 0
     key = c[keep].astype(np.int64) * nf + r[keep]
     diag = np.arange(nf, dtype=np.int64) * (nf + 1)           # every diagonal entry is stored
-    ukey = np.unique(np.concatenate([key, diag]))
+    extra = np.zeros(0, dtype=np.int64)
+    if couplings is not None and len(couplings):
+        cr, cc = _coupling_entries(couplings, fidx)
+        ok = (cr >= 0) & (cc >= 0) & ((cr <= cc) if upper else True)
+        extra = cc[ok].astype(np.int64) * nf + cr[ok]
+    ukey = np.unique(np.concatenate([key, diag, extra]))
     cols = ukey // nf
     indices = (ukey % nf).astype(np.int32)
     indptr = np.zeros(nf + 1, dtype=np.int32)
     np.cumsum(np.bincount(cols, minlength=nf), out=indptr[1:])
     emap = np.full((len(el), 12, 12), -1, dtype=np.int32)
     emap[keep] = np.searchsorted(ukey, key).astype(np.int32)
-    return indptr, indices, emap
+    return indptr, indices, emap, ukey
 
 
 class FreeSystem:
@@ -76,8 +96,13 @@ class FreeSystem:
 
     Parameters
     ----------
-    frame : the Frame. mask : (6n,) bool, constrained DOFs.
+    frame : the Frame. mask : (6N,) bool, constrained DOFs; N >= n: nodes beyond the frame's
+        (rigid plates of a contact solve, say) carry no elements and couple only through
+        ``couplings``.
     method : "ldl" (qdldl on the symmetric part; default) or "lu" (SuperLU on the full tangent).
+    couplings : (p, 2) node pairs whose translational 3 x 3 blocks belong to the pattern too
+        (contact between yarns, or a yarn and a plate): :meth:`block_slots` maps blocks over
+        such nodes to slots and :meth:`add_blocks` adds them after :meth:`assemble` (ldl only).
 
     Attributes
     ----------
@@ -86,7 +111,7 @@ class FreeSystem:
     of the last LDL^T (None when only an LU factor exists).
     """
 
-    def __init__(self, frame, mask: np.ndarray, method: str = "ldl"):
+    def __init__(self, frame, mask: np.ndarray, method: str = "ldl", *, couplings=None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}")
         if _qdldl is None:
@@ -100,11 +125,14 @@ class FreeSystem:
         self.nf = nf
         fidx = np.full(self.mask.size, -1, dtype=np.int64)
         fidx[self.free] = np.arange(nf)
-        indptr, indices, self.emap = _slots(frame, fidx, upper=True)
+        if couplings is not None and len(couplings) and method != "ldl":
+            raise ValueError("couplings need method 'ldl'")
+        self._fidx = fidx
+        indptr, indices, self.emap, self._ukey = _slots(frame, fidx, upper=True, couplings=couplings)
         self.A = sp.csc_matrix((np.zeros(len(indices)), indices, indptr), shape=(nf, nf))
         self.full_map = None
         if self.method == "lu":
-            fp, fi, self.full_map = _slots(frame, fidx, upper=False)
+            fp, fi, self.full_map, _ = _slots(frame, fidx, upper=False)
             self.F = sp.csc_matrix((np.zeros(len(fi)), fi, fp), shape=(nf, nf))
         self._qd = None
         self._lu = None
@@ -120,6 +148,44 @@ class FreeSystem:
         if self.full_map is not None:
             _scatter_full(Ke, self.full_map, self.F.data)
         self._sym = None
+
+    def block_slots(self, nodes, strict: bool = True) -> np.ndarray:
+        """(na, 3S, 3S) int32 slots of the translational blocks over ``nodes`` (na, S) in the
+        upper triangle (-1: a constrained DOF or a lower-triangle entry). A block outside the
+        pattern (its node pairs were not among the ``couplings``): SolverError, or with
+        ``strict=False`` None."""
+        nd = np.asarray(nodes, dtype=np.int64)
+        na, S = nd.shape
+        dof = (6 * nd[:, :, None] + np.arange(3)).reshape(na, 3 * S)
+        fg = self._fidx[dof]
+        r = np.broadcast_to(fg[:, :, None], (na, 3 * S, 3 * S))
+        c = np.broadcast_to(fg[:, None, :], (na, 3 * S, 3 * S))
+        keep = (r >= 0) & (c >= 0) & (r <= c)
+        key = c[keep].astype(np.int64) * max(self.nf, 1) + r[keep]
+        pos = np.searchsorted(self._ukey, key)
+        pos = np.minimum(pos, len(self._ukey) - 1)
+        if key.size and not np.array_equal(self._ukey[pos], key):
+            if not strict:
+                return None
+            raise SolverError("a contact block lies outside the tangent's pattern (couplings missing)")
+        out = np.full((na, 3 * S, 3 * S), -1, dtype=np.int32)
+        out[keep] = pos.astype(np.int32)
+        return out
+
+    def add_blocks(self, blocks: np.ndarray, slots: np.ndarray) -> None:
+        """Add symmetric blocks (na, B, B) at ``slots`` (na, B, B) from :meth:`block_slots`."""
+        if len(blocks):
+            add_blocks(np.ascontiguousarray(blocks, dtype=float), np.ascontiguousarray(slots), self.A.data)
+        self._sym = None
+
+    def add_diagonal(self, d: np.ndarray) -> None:
+        """Add d (nf,) to the diagonal of the free matrix."""
+        self.A.data[self.A.indptr[1:] - 1] += d
+        self._sym = None
+
+    def diagonal(self) -> np.ndarray:
+        """(nf,) the diagonal of the free matrix (last assembly)."""
+        return self.A.data[self.A.indptr[1:] - 1].copy()
 
     def shift_diagonal(self, sigma: float, base: np.ndarray | None = None) -> np.ndarray:
         """Set the diagonal of the free matrix to base (1 + sigma) (base: the assembled diagonal,
@@ -204,7 +270,7 @@ class FreeSystem:
         if self.full_map is None:
             fidx = np.full(self.mask.size, -1, dtype=np.int64)
             fidx[self.free] = np.arange(self.nf)
-            fp, fi, self.full_map = _slots(self._frame, fidx, upper=False)
+            fp, fi, self.full_map, _ = _slots(self._frame, fidx, upper=False)
             self.F = sp.csc_matrix((np.zeros(len(fi)), fi, fp), shape=(self.nf, self.nf))
         _scatter_full(Ke, self.full_map, self.F.data)
         return self.F

@@ -5,8 +5,9 @@ The cell (or frame) lies between a fixed bottom plate and a top plate that moves
 With ``geometry="linear"`` each step is a linear-beam contact solve whose gaps are
 linearised about the previous step's deformed state (contacts are searched again at every
 step), so new contacts appear as the fabric compresses while every step stays a convex
-problem; with ``geometry="nonlinear"`` each step is a Newton solve of the co-rotational
-frame (:func:`homtex.contact.newton.newton_contact`). ``homtex.compress`` is the public entry.
+problem; with ``geometry="nonlinear"`` the large-motion engine takes over
+(:mod:`homtex.contact.nl_compress`: co-rotational beams, barrier contact, friction,
+pseudo-transient continuation). ``homtex.compress`` is the public entry.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from ..analysis.nonlinear import Corotational
 from ..analysis.stepping import StepFailure, flag_force_drops, march
 from ..errors import InputError
 from ..model.frame import Frame
@@ -26,7 +26,6 @@ from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
 from ..model.scene import Plate, default_pins
 from ..output.datasets import curve_dataset
 from ..output.progress import Progress
-from .newton import newton_contact
 from .options import Contact
 from .solver import ContactSolver
 
@@ -48,8 +47,8 @@ _META = {
     "linear_solves": ("1", "linear solves of the step (last sub-step)"),
     "substeps": ("1", "sub-steps the step needed (1: none; more after halving a failed step)"),
     "contact_energy": ("N mm", "energy stored in the contact penalty springs"),
-    "newton_iterations": ("1", "Newton iterations of the step (geometry='nonlinear'; 0: linear)"),
-    "stabilization_force": ("N", "largest viscous stabilisation force on a node (geometry='nonlinear')"),
+    "newton_iterations": ("1", "Newton iterations of the step (0: the linear model has none)"),
+    "stabilization_force": ("N", "stabilisation force (0: the linear model has none)"),
     **{k: ("N mm", v) for k, v in ENERGY_LONG_NAMES.items()},
 }
 _STRAIN = ("1", "compression strain (plate displacement / initial plate distance)")
@@ -152,33 +151,34 @@ def _record(rec, test: CompressionTest, res, target, control, nsub, masks):
 
 def run_compression(test: CompressionTest, targets, *, control: str, contact: Contact, solver: str, tol: float,
                     maxiter=None, max_cuts: int = 4, progress: bool = False, geometry: str = "linear",
-                    stabilize: float = 0.0) -> xr.Dataset:
+                    friction_spec: dict | None = None) -> xr.Dataset:
     """The compression curve of ``test`` through the load levels ``targets`` (strains or kPa).
 
-    A failing step is halved (:func:`homtex.analysis.stepping.march`, recursive bisection, up to
-    ``max_cuts`` levels); a step that still fails ends the curve: the steps before it are kept,
-    ``attrs["status"]`` is "failed" and ``attrs["status_detail"]`` says where and why.
+    ``geometry="linear"``: linear beams, contact re-linearised per step. A failing step is halved
+    (:func:`homtex.analysis.stepping.march`, recursive bisection, up to ``max_cuts`` levels); a
+    step that still fails ends the curve: the steps before it are kept, ``attrs["status"]`` is
+    "failed" and ``attrs["status_detail"]`` says where and why. ``geometry="nonlinear"``: the
+    large-motion engine (:func:`homtex.contact.nl_compress.run_nonlinear_compression`;
+    ``friction_spec``: a cell file's friction table).
     """
+    if geometry == "nonlinear":
+        from .nl_compress import run_nonlinear_compression
+
+        return run_nonlinear_compression(test, targets, control=control, contact=contact,
+                                         friction_spec=friction_spec, max_cuts=max_cuts, progress=progress)
     t0 = time.perf_counter()
-    frame = test.frame
     cs = test.solver(contact, solver=solver, tol=tol, maxiter=maxiter)
     names = list(test.groups)
     masks = [np.asarray(test.groups[g], dtype=bool) for g in names]
     rec = {k: [] for k in ("strain", *_META, "group_energy")}
-    state = {"u_ref": None, "warm": None, "plate_u": None}
-    cor = Corotational(frame, cs.assembler) if geometry == "nonlinear" else None
+    state = {"u_ref": None, "warm": None}
 
     def solve(level):
         if control == "displacement":
             cs.set_plate(1, displacement=-level * test.H0)
         else:
             cs.set_plate(1, force=level * test.area * 1e-3)
-        if cor is None:
-            return cs.solve(u_ref=state["u_ref"], warm_keys=state["warm"])
-        # the co-rotational state is the previous converged one; a failed Newton solve restores it
-        res, pu, _ = newton_contact(cs, cor, plate_u=state["plate_u"], warm_keys=state["warm"], stabilize=stabilize)
-        state["next_plate_u"] = pu
-        return res
+        return cs.solve(u_ref=state["u_ref"], warm_keys=state["warm"])
 
     def retry(err):
         return "singular" not in str(err)   # a singular operator does not improve with smaller steps
@@ -192,7 +192,7 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
             if not all(np.isfinite(v).all() for v in (res.u, e["plate_force"])):
                 raise StepFailure("non-finite result", level=st.level, reached=st.level, target=st.target,
                                   cuts=0, first=None, last=None)
-            state.update(u_ref=e["u_ext"], warm=e["active_keys"], plate_u=state.get("next_plate_u"))
+            state.update(u_ref=e["u_ext"], warm=e["active_keys"])
             if st.target is None:
                 continue
             bar.step(f"{st.substeps} sub-steps" if st.substeps > 1 else "")
@@ -221,7 +221,7 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
         strategy=contact.strategy, enforcement=contact.enforcement, penalty_N_per_mm=cs.k,
         bottom_plate_z_mm=test.z_lo, top_plate_z_mm=test.z_lo + test.H0, solver=solver,
         seconds=time.perf_counter() - t0, geometry=geometry, supports=str(test.fixed),
-        steps_requested=int(len(targets)), stabilize=float(stabilize), initial_overlap=contact.initial_overlap,
+        steps_requested=int(len(targets)), initial_overlap=contact.initial_overlap,
         initial_overlaps=int(cs.initial_overlaps), initial_overlap_max_mm=cs.initial_overlap_max)
     set_status(ds, status, detail)
     ds.attrs["steps_done"] = int(len(rec["strain"]))

@@ -14,13 +14,17 @@ __all__ = ["Contact", "ENFORCEMENTS", "STRATEGIES"]
 
 STRATEGIES = ("pdas", "removal")
 
+#: largest friction coefficient accepted (measured yarn coefficients are 0.1-1)
+MAX_FRICTION = 10.0
+
 
 ENFORCEMENTS = ("augmented", "penalty")
 
 
 @dataclass
 class Contact:
-    """Contact options (frictionless, normal contact between yarns and with rigid plates).
+    """Contact options: normal contact between yarns and with rigid plates, and (with
+    ``geometry="nonlinear"``) Coulomb friction.
 
     Parameters
     ----------
@@ -44,7 +48,19 @@ class Contact:
     initial_overlap : "touch" (default): yarn pairs that overlap in the undeformed frame (a geometry
         artefact) count as touching: their gap is offset to zero, they may separate but not
         overlap further; "resolve": they are pushed apart in the first solve.
-    friction : Coulomb coefficient; only 0 (frictionless) is implemented.
+    friction : Coulomb coefficient of every yarn-yarn and yarn-plate contact (>= 0). None
+        (default): the cell file's ``[contact]`` table where a cell gives one, else 0. Friction
+        needs the large-motion engine (``geometry="nonlinear"``); the linear contact solve is
+        frictionless and refuses a nonzero value.
+    plate_friction : coefficient of yarn-plate contacts (default: ``friction``, or the cell
+        file's ``plate`` entry).
+    barrier_gap : activation gap of the large-motion barrier (ghat), relative to the smallest
+        contact radius (default 0.01: forces act from 1 % of the thinnest yarn's radius on,
+        and the contact surfaces are found to within that distance).
+    barrier_stiffness : barrier stiffness kappa, N/mm (default: the mean axial stiffness EA / L
+        of the elements).
+    friction_slip : slip (mm) at which the smoothed Coulomb friction saturates (eps_v; below it
+        a contact sticks elastically).
     max_forward_error : with the direct solver, each solve is refined once; a relative
         correction above this (an ill-conditioned system, e.g. a penalty far above the beam
         stiffness) raises SolverError instead of returning an inaccurate state.
@@ -64,10 +80,14 @@ class Contact:
     reuse_tol: float = 0.05
     detect_rounds: int = 5
     detect_tol: float = 1e-3
-    friction: float = 0.0
+    friction: float | None = None
     penalty_growth_max: float = 1e4
     initial_overlap: str = "touch"
     max_forward_error: float = 1e-6
+    plate_friction: float | None = None
+    barrier_gap: float = 0.01
+    barrier_stiffness: float | None = None
+    friction_slip: float = 1e-4
 
     def __post_init__(self):
         def named(name):
@@ -90,7 +110,24 @@ class Contact:
         if not isinstance(self.reuse_amg, (bool, np.bool_)):
             raise InputError(f"{named('reuse_amg')} must be True or False, got {self.reuse_amg!r}")
         check_choice(self.initial_overlap, named("initial_overlap"), ("touch", "resolve"))
-        self.friction = check_number(self.friction, named("friction"), ge=0.0)
-        if self.friction != 0.0:
-            raise InputError(f"{named('friction')} = {self.friction!r}: Coulomb friction is not "
-                             "implemented for the linear contact solve (frictionless contact only, friction=0)")
+        for name in ("friction", "plate_friction"):
+            if getattr(self, name) is not None:
+                setattr(self, name, check_number(getattr(self, name), named(name), ge=0.0, le=MAX_FRICTION))
+        self.barrier_gap = check_number(self.barrier_gap, named("barrier_gap") + " (relative to the smallest contact "
+                                        "radius)", gt=0.0, le=0.5)
+        if self.barrier_stiffness is not None:
+            self.barrier_stiffness = check_number(self.barrier_stiffness, named("barrier_stiffness") + " (N/mm)",
+                                                  gt=0.0, le=1e12)
+        self.friction_slip = check_number(self.friction_slip, named("friction_slip") + " (mm)", gt=0.0, le=1.0)
+
+    @property
+    def has_friction(self) -> bool:
+        """A nonzero friction coefficient was asked for (yarns or plates)."""
+        return bool((self.friction or 0.0) > 0.0 or (self.plate_friction or 0.0) > 0.0)
+
+    def require_frictionless(self, what: str = "the linear contact solve") -> None:
+        """InputError if friction was asked for where only frictionless contact exists."""
+        if self.has_friction:
+            raise InputError(f"Contact option 'friction' = {self.friction!r} (plate_friction {self.plate_friction!r}): "
+                             f"{what} is frictionless; Coulomb friction needs the large-motion engine, "
+                             "geometry=\"nonlinear\"")

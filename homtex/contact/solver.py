@@ -57,6 +57,7 @@ class ContactSolver(ActiveSets, LinearSystems):
             contact = Contact()
         if not isinstance(contact, Contact):
             raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
+        contact.require_frictionless()
         solver = option("static_solver", solver)
         if solver not in ("amg", "direct", "cg"):
             raise InputError(f"solver must be one of ('amg', 'direct', 'cg'), got {solver!r}")

@@ -199,3 +199,15 @@ def sym_upper_matvec(indptr, indices, data, x, out):
             if i != j:
                 out[i] += v * xj
         out[j] += acc
+
+
+@njit(cache=True)
+def add_blocks(H, slots, data):
+    """data[slots[r, i, j]] += H[r, i, j] where slots >= 0: symmetric blocks (na, B, B) added to
+    the upper triangle of a CSC matrix (contact Hessians on the free-DOF tangent)."""
+    for r in range(H.shape[0]):
+        for i in range(H.shape[1]):
+            for j in range(H.shape[2]):
+                k = slots[r, i, j]
+                if k >= 0:
+                    data[k] += H[r, i, j]

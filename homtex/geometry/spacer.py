@@ -497,6 +497,7 @@ def _info(plans, bar_list, yarns, frame, elements, yarn, n_yarn_el, T, w, cs, W,
         "pile_segments": nleg,
         "bars": {b.name: b for b in bar_list},
         "yarn_types": dict(yarns),
+        "yarn_type": {i: p.bar.yarn for i, p in enumerate(plans)},
         "shape": sh,
         "n_bonds": int(is_bond.sum()),
     }

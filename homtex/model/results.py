@@ -31,17 +31,21 @@ class Status(str, enum.Enum):
 
     ``OK``: everything asked for was done. ``FAILED``: it stopped at a failure; the Dataset
     holds what was done before it (maybe nothing) and ``attrs["status_detail"]`` says where
-    and why. ``NOT_RUN``: a study point that has not run yet.
+    and why. ``FLAGGED``: everything asked for was done, but a check of the result failed
+    (a large-motion compression curve whose stabilisation absorbed more than 1 % of the
+    external work, or whose energy balance is off by more than 1 %); ``status_detail`` says
+    which, and studies count it as failed. ``NOT_RUN``: a study point that has not run yet.
     """
 
     OK = "ok"
     FAILED = "failed"
+    FLAGGED = "flagged"
     NOT_RUN = "not_run"
 
     @property
     def code(self) -> int:
-        """Integer code of a study's ``status`` variable (0 ok, 1 failed, -1 not run)."""
-        return {"ok": 0, "failed": 1, "not_run": -1}[self.value]
+        """Integer code of a study's ``status`` variable (0 ok, 1 failed, 2 flagged, -1 not run)."""
+        return {"ok": 0, "failed": 1, "flagged": 2, "not_run": -1}[self.value]
 
     def __str__(self) -> str:
         return self.value

@@ -3,7 +3,9 @@
 Three experiments, one Dataset each (netCDF) and one chart:
 
 1. ``unseamed``: compression of the unseamed cell with linear and with co-rotational beams
-   (viscous stabilisation at two factors, to show its bias), stress against strain, Newton
+   (the former co-rotational contact solve with viscous stabilisation at two factors, to show
+   its bias, and the large-motion engine that replaced it in ``compress(geometry="nonlinear")``;
+   its own study is ``spacer_nonlinear_compression.py``), stress against strain, Newton
    iterations, the largest stabilisation force against the plate force, run time.
 2. ``seam``: the d = 24 mm seam cell, stitch pre-strain ramped with co-rotational beams as far
    as the solve goes; the linear cell at the same pre-strain for comparison (seam-line and
@@ -32,15 +34,62 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 
+def former_corotational(cell, strain, steps, stabilize):
+    """The unseamed curve of the former co-rotational contact solve (``newton_contact``: linearised
+    contact, viscous stabilisation), as ``compress(geometry="nonlinear", stabilize=...)`` ran it
+    before the large-motion engine took over (steps halved up to 4 times on failure)."""
+    import homtex
+    from homtex.analysis.corotational import Corotational
+    from homtex.analysis.stepping import StepFailure, march
+    from homtex.contact.compress import CompressionTest
+    from homtex.contact.newton import newton_contact
+    from homtex.output.datasets import curve_dataset
+
+    test = CompressionTest.build(cell.frame, info=cell.info, groups=cell.groups)
+    cs = test.solver(homtex.Contact(), solver="direct", tol=1e-10)
+    cor = Corotational(cell.frame, cs.assembler)
+    st = {"pu": None, "warm": None}
+    rows = {"strain": [], "stress": [], "force": [], "newton_iterations": [], "stabilization_force": []}
+
+    def solve(level):
+        cs.set_plate(1, displacement=-level * test.H0)
+        res, pu, it = newton_contact(cs, cor, plate_u=st["pu"], warm_keys=st["warm"], stabilize=stabilize)
+        return res, pu, it
+
+    status, detail = "ok", ""
+    try:
+        for step in march(solve, strain * np.arange(1, steps + 1) / steps, max_cuts=4):
+            res, pu, it = step.result
+            st.update(pu=pu, warm=res.extra["active_keys"])
+            if step.target is None:
+                continue
+            F = float(res.extra["plate_force"][1])
+            for k, v in (("strain", step.level), ("stress", F / test.area * 1e3), ("force", F),
+                         ("newton_iterations", it), ("stabilization_force", res.extra["stabilization_force"])):
+                rows[k].append(v)
+    except StepFailure as err:
+        status, detail = "failed", str(err.first or err)
+    units = {"stress": "kPa", "force": "N", "newton_iterations": "1", "stabilization_force": "N"}
+    ds = curve_dataset({k: ("strain", rows[k], units[k], k.replace("_", " ")) for k in units},
+                       {"strain": (rows["strain"], "1", "compression strain")})
+    ds.attrs.update(status=status, status_detail=detail, steps_done=len(rows["strain"]))
+    return ds
+
+
 def unseamed(cell, strain, steps, factors):
     import homtex
 
     curves, rows = [], []
-    for geometry, c in [("linear", 0.0)] + [("nonlinear", f) for f in factors]:
+    for geometry, c in [("linear", 0.0), ("engine", 0.0)] + [("nonlinear", f) for f in factors]:
         t = time.perf_counter()
-        ds = homtex.compress(cell, strain=strain, steps=steps, geometry=geometry, stabilize=c)
+        if geometry == "nonlinear":
+            ds = former_corotational(cell, strain, steps, c)
+        else:
+            ds = homtex.compress(cell, strain=strain, steps=steps, geometry="nonlinear" if geometry == "engine" else
+                                 "linear")
         sec = time.perf_counter() - t
-        label = "linear" if geometry == "linear" else f"co-rotational, stabilise {c:g}"
+        label = {"linear": "linear", "engine": "large-motion engine (barrier, PTC)"}.get(
+            geometry, f"co-rotational, stabilise {c:g}")
         ratio = (ds.stabilization_force / np.maximum(ds.force, 1e-300)).values
         curves.append(ds[["stress", "newton_iterations"]].assign(stab_ratio=("strain", ratio)).expand_dims(model=[label]))
         rows.append((label, sec, status_text(ds), int(ds.attrs["steps_done"])))

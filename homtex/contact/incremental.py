@@ -1,0 +1,447 @@
+"""Quasi-static steps of a co-rotational frame with large-motion contact and friction.
+
+:class:`IncrementalSolver` holds a state (translations, nodal rotations, plate heights, load
+factor, pre-strain scale) and takes it to the equilibrium of the next prescribed level:
+*state + scene + prescribed plate positions (or plate forces) + load factor + pre-strain scale
+-> converged state, or SolverError with the state unchanged*. Each step minimises one potential
+over translations and nodal spins,
+
+    Pi = U (co-rotational beams, :class:`~homtex.analysis.corotational.Corotational`)
+       + B (IPC barrier, yarn-yarn and yarn-plate, :mod:`.ipc_scene`)
+       + D (lagged smoothed Coulomb friction over the step, :mod:`.friction`) - f_ext . u,
+
+by Newton's method with pseudo-transient continuation (PTC, Kelley and Keyes 1998): the
+system is (H + M / delta) du = -g, H the symmetric part of the consistent beam tangent plus the
+PSD contact and friction blocks, M a lumped diagonal of the beam tangent (frozen per step),
+delta the pseudo-time step adapted by switched evolution relaxation (delta grows with the
+residual's decrease; it shrinks when the factor shows negative pivots or the line search
+cuts). PTC changes the path to an equilibrium, not the equilibrium: the converged state has a
+zero free residual. The energy the pseudo-viscous term absorbs at fixed prescribed motions,
+sum du^T M du / delta over the corrector iterations, is recorded: small on smooth paths, large
+where the state jumps at a fixed plate position (snap-through, a buckling leg).
+
+Every trial state is intersection-free: the step length is capped by the additive CCD of
+:mod:`.ccd` (yarn pairs, with the candidates searched again before a step can reach a pair
+outside the list) and the exact plate bound; prescribed motions (plates, supports) enter the
+first iterations as part of the Newton step (a linearised predictor cut by the CCD, never a jump
+through a yarn), then Newton corrects at the prescribed level with an Armijo line search on Pi.
+
+Friction is lagged: normal forces and tangent bases frozen at the step's start, re-lagged at
+the converged state until the nodes' normal forces settle (``friction_rounds``). The energy it
+dissipates over a step is the work of its forces along the straight path of the step.
+
+Energy bookkeeping (cumulative, per accepted state): external work (trapezoidal sum of the
+forces on prescribed DOFs, plates and loads times their motion), strain energy split, contact
+energy, friction dissipated, stabilisation absorbed, pre-strain work, and the balance.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..analysis.corotational import PARALLEL_ELEMENTS, Corotational
+from ..errors import InputError, SolverError
+from ..fem.corotational_system import apply_increment
+from ..model.frame import Frame
+from ..model.scene import Plate, Scene, parse_loads
+from .ccd import pair_step_bound, plate_step_bound
+from .ipc_scene import ContactScene, PlateState, friction_setup
+from .ipc_system import SystemMixin, _StepFailed, lag_change, serial_numba
+from .options import Contact
+from .potential import Enforcement
+
+log = logging.getLogger(__name__)
+
+__all__ = ["IncrementalSolver", "NonlinearSettings", "StepInfo"]
+
+
+@dataclass
+class NonlinearSettings:
+    """Settings of the large-motion step solver.
+
+    tol : free residual relative to the largest of the internal, contact and applied forces.
+    max_iter : Newton iterations per friction round. friction_rounds : lag updates per step
+    (1: lagged at the step's start only). friction_tol : relative change of the nodes' normal
+    forces below which the lag has settled. eta : CCD keeps each gap >= eta x its start.
+    max_spin : largest nodal rotation per iteration, rad. delta0 : pseudo-time step at the
+    first step (M / delta0 is added to the tangent); delta_max : largest one at a step's start.
+    armijo : sufficient-decrease constant of the line search. predictor_slip : while prescribed
+    motion is left, friction's Hessian saturates at this share of the largest prescribed
+    translation instead of eps_v (measured on the spacer cell with mu = 0.2 and the capstan:
+    0 (the stick stiffness) fails the capstan's sliding rope, 0.03-0.1 pass both, 1 makes the
+    spacer curve 2-3x slower).
+    """
+
+    tol: float = 1e-8
+    max_iter: int = 80
+    friction_rounds: int = 4
+    friction_tol: float = 1e-3
+    eta: float = 0.1
+    max_spin: float = 0.5
+    delta0: float = 1e12
+    delta_max: float = 1e12
+    armijo: float = 1e-4
+    predictor_slip: float = 0.1
+
+
+@dataclass
+class StepInfo:
+    """What one accepted step did (per step; the cumulative ledger is on the solver)."""
+
+    iterations: int = 0
+    cuts: int = 0
+    ccd_limited: int = 0
+    searches: int = 0
+    friction_rounds: int = 0
+    patterns: int = 0
+    projected: int = 0
+    residual: float = 0.0
+    delta: float = 0.0
+    stabilization: float = 0.0
+    dissipation: float = 0.0
+    negative_eigenvalues: int = -1
+    extra: dict = field(default_factory=dict)
+
+
+class IncrementalSolver(SystemMixin):
+    """Large-rotation frame with large-motion contact and friction, stepped quasi-statically.
+
+    Parameters
+    ----------
+    frame : homtex.Frame (finite, 1- or 2-periodic; periodic images keep their offsets).
+    fixed : supports as in ``solve_static`` (dict values: prescribed at load factor 1).
+    loads : dead nodal loads at load factor 1 (N, N mm).
+    plates : homtex.Plate list (rigid planes normal to z; ``force`` set: force control, the
+        plate's height is an unknown). Each plate's ``z`` is its starting height.
+    contact : homtex.Contact (barrier_gap, barrier_stiffness, friction, friction_slip, margin).
+    friction_spec : a cell file's friction (:meth:`homtex.Cell.friction_spec`), used when
+        ``contact.friction`` is None.
+    settings : :class:`NonlinearSettings`.
+    """
+
+    def __init__(self, frame: Frame, fixed=None, loads=None, plates=(), contact: Contact | None = None, *,
+                 friction_spec: dict | None = None, settings: NonlinearSettings | None = None):
+        if not isinstance(frame, Frame):
+            raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
+        contact = Contact() if contact is None else contact
+        if not isinstance(contact, Contact):
+            raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
+        self.s = settings or NonlinearSettings()
+        self.frame = frame
+        self.contact = contact
+        sc = Scene.build(frame, fixed, loads, plates)
+        n, P = frame.n_nodes, len(sc.plates)
+        self.n, self.P, self.N = n, P, n + P
+        r = frame.contact_radius
+        ghat = contact.barrier_gap * float(r.min())
+        kappa = contact.barrier_stiffness or float(np.mean(frame.EA / frame.length))
+        enf = Enforcement("barrier", ghat=ghat, kappa=kappa)
+        self.ghat, self.kappa, self.eps_v = ghat, kappa, contact.friction_slip
+        fc = np.array([p.force_controlled for p in sc.plates], dtype=bool)
+        self.plates = PlateState(z=np.array([float(p.z) for p in sc.plates]),
+                                 normal=np.array([int(p.normal) for p in sc.plates]), force_controlled=fc)
+        margin = contact.margin if contact.margin is not None else max(float(r.max()), 20.0 * ghat)
+        self.scene = ContactScene(frame, self.plates, enf, enf, friction_setup(frame, contact, friction_spec),
+                                  max(margin, 2.0 * ghat))
+        # the widest search: a node moves at most half of it per iteration
+        self.max_margin = max(self.scene.margin, 4.0 * float(r.max()))
+        mask = np.ones((self.N, 6), dtype=bool)
+        mask[:n] = sc.mask.reshape(n, 6)
+        mask[n:, 2] = ~fc
+        self.mask = mask.ravel()
+        self.free = np.flatnonzero(~self.mask)
+        self.ubar = np.where(sc.mask, sc.values, 0.0).reshape(n, 6)
+        self.f_loads = sc.loads.reshape(n, 6)
+        self.plate_force = np.array([p.normal * p.force if p.force_controlled else 0.0 for p in sc.plates])
+        self.cor = Corotational(frame, geometric="consistent")
+        self.motion = 0.0
+        self.presc = np.zeros((n, 6))          # current values of the prescribed DOFs (mm, rad)
+        self.load_scale = 0.0
+        self.prestrain_scale = 1.0
+        self.delta = self.s.delta0
+        self.small = frame.n_elements < PARALLEL_ELEMENTS
+        self.sys = None
+        self._coupled = np.zeros((0, 2), dtype=np.int64)
+        self.M = None
+        self.info = StepInfo()
+        with serial_numba(self.small):
+            self.scene.search(self.positions)
+            self._pattern()
+            self._start_ledger()
+
+    # ------------------------------------------------------------------ state
+    @property
+    def positions(self) -> np.ndarray:
+        """(n, 3) current node positions, mm."""
+        return self.frame.nodes + self.cor.ut
+
+    @property
+    def plate_z(self) -> np.ndarray:
+        """(P,) current plate heights, mm."""
+        return self.plates.z.copy()
+
+    def snapshot(self):
+        return (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy(), self.motion, self.prestrain_scale,
+                self.delta, self.plate_force.copy(), self.load_scale, self.presc.copy())
+
+    def set_loads(self, loads) -> None:
+        """Replace the dead loads (dict node -> (Fx, Fy, Fz, Mx, My, Mz), N and N mm, scaled by the
+        load factor) from the next step on."""
+        self.f_loads = parse_loads(loads, self.n).reshape(self.n, 6)
+
+    def checkpoint(self):
+        """State and energy ledger, to hand back to :meth:`rollback` (undo accepted steps)."""
+        return self.snapshot(), dict(self.ledger), self._react.copy(), self._dUds
+
+    def rollback(self, cp) -> None:
+        self.restore(cp[0])
+        self.ledger.clear()
+        self.ledger.update(cp[1])
+        self._react, self._dUds = cp[2].copy(), cp[3]
+
+    def restore(self, snap) -> None:
+        self.cor.ut[...] = snap[0]
+        self.cor.Q[...] = snap[1]
+        self.plates.z[...] = snap[2]
+        self.motion, self.prestrain_scale, self.delta = snap[3], snap[4], snap[5]
+        self.plate_force[...] = snap[6]
+        self.load_scale = snap[7]
+        self.presc[...] = snap[8]
+
+    # ------------------------------------------------------------------ public step
+    def solve(self, *, motion: float | None = None, loads: float | None = None, plate_z=None, plate_force=None,
+              prestrain_scale: float | None = None, prescribed: dict | None = None) -> StepInfo:
+        """Take the state to equilibrium at the given levels; SolverError leaves it unchanged.
+        Levels not given keep their current values (all start at 0; the pre-strain scale at 1).
+
+        motion : factor on the prescribed support values of ``fixed`` (mm, rad: rotations are
+        spins about the fixed axes). prescribed : {node: {dof: value}} values of supported DOFs at
+        the end of this step (mm, rad), overriding ``motion`` for them (paths that are not
+        straight). loads : factor on the dead loads. plate_z : {plate: height}
+        (or (P,) array, NaN for force-controlled ones) of displacement-controlled plates, mm.
+        plate_force : {plate: force pressing it on the yarns} of force-controlled plates, N.
+        prestrain_scale : factor on the frame's pre-strain.
+        """
+        target_z = self.plates.z.copy()
+        if plate_z is not None:
+            items = plate_z.items() if isinstance(plate_z, dict) else enumerate(np.asarray(plate_z, dtype=float))
+            for p, v in items:
+                if self.plates.force_controlled[p]:
+                    if np.isfinite(v):
+                        raise InputError(f"plate {p} is force-controlled: give its force, not its height")
+                    continue
+                target_z[p] = float(v)
+        snap = self.snapshot()
+        try:
+            if plate_force is not None:
+                for p, v in (plate_force.items() if isinstance(plate_force, dict) else enumerate(plate_force)):
+                    if not self.plates.force_controlled[p]:
+                        raise InputError(f"plate {p} is displacement-controlled: give its height, not a force")
+                    self.plate_force[p] = self.plates.normal[p] * float(v)
+            if prestrain_scale is not None:
+                self.prestrain_scale = float(prestrain_scale)
+            target = self.presc.copy()
+            if motion is not None:
+                self.motion = float(motion)
+                target = np.where(self.mask[:6 * self.n].reshape(self.n, 6), self.motion * self.ubar, 0.0)
+            for node, spec in (prescribed or {}).items():
+                for dof, v in spec.items():
+                    if not self.mask[6 * node + dof]:
+                        raise InputError(f"prescribed: node {node} DOF {dof} is not supported (give it in fixed)")
+                    target[node, dof] = float(v)
+            if loads is not None:
+                self.load_scale = float(loads)
+            with serial_numba(self.small):
+                info = self._step(target, target_z)
+                self._account(info, snap)
+        except (_StepFailed, SolverError, FloatingPointError, np.linalg.LinAlgError) as err:
+            self.restore(snap)
+            raise SolverError(str(err)) from None
+        return info
+
+    # ------------------------------------------------------------------ the step
+    def _step(self, target_u: np.ndarray, target_z: np.ndarray) -> StepInfo:
+        self.info = info = StepInfo()
+        x_start = self.positions.copy()
+        z_start = self.plates.z.copy()
+        self.delta = min(self.delta, self.s.delta_max)
+        self.M = None
+        lag = self.scene.friction_lag(x_start, z_start)
+        rounds = self.s.friction_rounds if self.scene.has_friction else 1
+        for rnd in range(rounds):
+            self._newton(target_u, target_z, x_start, lag)
+            info.friction_rounds = rnd + 1
+            used = lag
+            if not self.scene.has_friction:
+                break
+            lag = self.scene.friction_lag(self.positions, self.plates.z)
+            info.extra["lag_change"] = lag_change(used, lag, self.n)
+            if info.extra["lag_change"] <= self.s.friction_tol:
+                break
+        self.lag = used
+        ev = self._evaluate(x_start, [lg for lg in used if lg is not None], hessian=True)
+        self._assemble(ev)
+        self.sys.factor(inertia=True)
+        info.negative_eigenvalues = int(self.sys.negative) if self.sys.negative is not None else -1
+        info.dissipation = float(sum(fr.dissipation for _, fr in ev["fric"]))
+        info.delta = self.delta
+        info.extra.update(ev=ev, x_start=x_start)
+        return info
+
+    def _remaining(self, target_u, target_z) -> np.ndarray:
+        d = np.zeros((self.N, 6))
+        d[:self.n] = target_u - self.presc
+        d[self.n:, 2] = np.where(self.plates.force_controlled, 0.0, target_z - self.plates.z)
+        return d
+
+    def _converged(self, ev, rn) -> bool:
+        fc = ev["g_contact"]
+        ref = max(float(np.linalg.norm(ev["fint"])), float(np.linalg.norm(fc)),
+                  float(np.linalg.norm(self.load_scale * self.f_loads)), float(np.linalg.norm(self.plate_force)))
+        floor = 1e-12 * float(np.max(self.frame.EA))
+        return rn <= self.s.tol * ref + floor
+
+    def _newton(self, target_u, target_z, x_start, lag) -> None:
+        s, info = self.s, self.info
+        lag = [lg for lg in lag if lg is not None]
+        r_prev = None
+        for it in range(1, s.max_iter + 1):
+            ev = self._evaluate(x_start, lag, hessian=True)
+            rem = self._remaining(target_u, target_z)
+            g = ev["g"].ravel()
+            rn = float(np.linalg.norm(g[self.free]))
+            if not np.isfinite(rn) or not np.isfinite(ev["Pi"]):
+                raise _StepFailed(f"non-finite forces at iteration {it}")
+            presc = bool(np.any(rem))
+            if not presc and self._converged(ev, rn):
+                info.residual = rn
+                return
+            r_prev = rn
+            # the exact Hessian where it is positive definite (Newton converges quadratically);
+            # else the PSD-projected contact blocks and, if still needed, a smaller delta
+            # a predictor (prescribed motion left) mobilises friction over the slip of the step: its
+            # stick stiffness at eps_v would hold every contact, and most of them slide over the step
+            eps_h = self.s.predictor_slip * float(np.abs(rem[:, :3]).max(initial=0.0)) if presc else 0.0
+            if eps_h > self.eps_v and self.scene.has_friction:
+                ev = self._evaluate(x_start, lag, hessian=True, eps_hessian=eps_h)
+            self._assemble(ev)
+            if not self._factor(it, shrink=False):
+                ev = self._evaluate(x_start, lag, hessian=True, project=True, eps_hessian=eps_h)
+                self._assemble(ev)
+                self._factor(it)
+                info.projected += 1
+            rhs = -g
+            if presc:
+                rhs = rhs - self._hess_times(ev, rem).ravel()
+            du = rem.ravel().copy()
+            du[self.free] = self.sys.solve(rhs[self.free])
+            d = du.reshape(self.N, 6)
+            alpha, dPi, slope = self._line_search(ev, d, x_start, lag, presc, it)
+            if not presc:
+                self._adapt(du[self.free], alpha, dPi, slope, ev["Pi"])
+            log.debug("iteration %d: residual %.3e, step %.3g, delta %.2e, max |du| %.3e, active %d/%d", it, rn,
+                      alpha, self.delta, float(np.abs(d[:self.n, :3]).max(initial=0.0)), ev["pairs"].n_active,
+                      len(ev["plates"]["active"]))
+            df = du[self.free] * alpha
+            if not presc:
+                # the damping work at fixed prescribed motions: energy the pseudo-viscous term takes
+                # out while the state relaxes to equilibrium (while the plates move, it only slows
+                # the motion they drive)
+                info.stabilization += float(df @ (self.M * df)) / self.delta
+            info.iterations += 1
+            if presc:
+                self.presc += min(alpha, 1.0) * (target_u - self.presc)
+                if alpha >= 1.0:
+                    self.presc[...] = target_u
+                    self.plates.z[~self.plates.force_controlled] = target_z[~self.plates.force_controlled]
+        raise _StepFailed(f"did not converge in {s.max_iter} iterations (out-of-balance force {r_prev:.3e})")
+
+    def _line_search(self, ev, d, x_start, lag, presc, it) -> float:
+        """Step length along d: capped by the rotations, the CCD and (corrector) Armijo on Pi."""
+        s, info = self.s, self.info
+        x = self.positions
+        dx = d[:self.n, :3]
+        dz = d[self.n:, 2]
+        spin = float(np.abs(d[:self.n, 3:]).max(initial=0.0))
+        amax = min(1.0, s.max_spin / spin) if spin > 0 else 1.0
+        move = float(np.sqrt(np.einsum("ij,ij->i", dx, dx)).max(initial=0.0))
+        # a node moves at most half the widest search margin per iteration
+        amax = min(amax, 0.5 * (self.max_margin - 2.0 * self.ghat) / move) if move > 0 else amax
+        reach = amax * move
+        if not self.scene.covers(x, reach):
+            self._search(x, min(max(self.scene.margin, 2.2 * reach + 2.0 * self.ghat), self.max_margin))
+        st = self.scene.stencil
+        a = amax
+        if len(st):
+            a = min(a, amax * pair_step_bound(x, amax * dx, st, eta=s.eta))
+        if self.P:
+            pn, pi = self.scene.plate_nodes, self.scene.plate_index
+            a = min(a, amax * plate_step_bound(x, amax * dx, pn, self.scene.node_r[pn], self.plates.origins(),
+                                                self.plates.normals(), plate=pi,
+                                                plate_motion=np.column_stack([np.zeros((self.P, 2)), amax * dz]),
+                                                eta=s.eta))
+        if a < amax:
+            info.ccd_limited += 1
+        if a <= 0.0 or (a < 1e-6 and self._stuck()):
+            raise _StepFailed(f"the prescribed motion cannot go on without an overlap at iteration {it} (the "
+                              f"collision-free step is {a:.2g}: plates closer than a yarn's diameter, or supports "
+                              "pushing a yarn through another)")
+        g = ev["g"]
+        free = self.free
+        slope = float(g.ravel()[free] @ d.ravel()[free])
+        base = (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy())
+        Pi0 = ev["Pi"]
+        ext = float(np.sum(self.load_scale * self.f_loads * d[:self.n])) + float(self.plate_force @ dz)
+        for _ in range(40):
+            self._apply(a, d)
+            if presc:
+                return a, 0.0, slope
+            trial = self._evaluate(x_start, lag, hessian=False)
+            dPi = trial["Pi"] - Pi0 - a * ext
+            if np.isfinite(trial["Pi"]) and (dPi <= s.armijo * a * slope or
+                                             abs(slope) * a < 1e-14 * max(abs(Pi0), 1e-300)):
+                return a, dPi, slope
+            self.cor.ut[...], self.cor.Q[...], self.plates.z[...] = base
+            a *= 0.5
+            info.cuts += 1
+        raise _StepFailed(f"the line search found no decrease at iteration {it}")
+
+    def _stuck(self) -> bool:
+        """True when a gap is down to 1e-6 of ghat (the barrier cannot hold it any closer)."""
+        x = self.positions
+        g = self.scene.plate_gaps(x, self.plates.z)
+        gmin = float(g.min(initial=np.inf))
+        if len(self.scene.stencil):
+            from .potential import pair_gaps
+
+            gmin = min(gmin, float(pair_gaps(x, self.scene.stencil).min()))
+        return gmin < 1e-6 * self.ghat
+
+    def _adapt(self, df, alpha, dPi, slope, Pi0) -> None:
+        """Pseudo-time step from the quality of the quadratic model (as a Levenberg-Marquardt
+        trust region): rho = actual / predicted decrease of Pi; good agreement grows delta
+        tenfold (towards Newton), poor agreement (or a line-search cut) shrinks it fourfold."""
+        shift = self.M / self.delta
+        curv = float(self.sys.matvec(df) @ df) - float(df @ (shift * df))
+        model = alpha * slope + 0.5 * alpha * alpha * curv
+        if abs(model) <= 1e-12 * max(abs(Pi0), 1e-300):
+            rho = 1.0
+        else:
+            rho = dPi / model if model < 0 else 0.0
+        if rho >= 0.75 and alpha >= 1.0:
+            self.delta = min(self.delta * 10.0, self.s.delta_max)
+        elif rho < 0.25 or alpha < 1.0:
+            self.delta = max(self.delta / 4.0, 1e-12)
+
+    def _apply(self, a, d) -> None:
+        inc = np.ascontiguousarray(a * d[:self.n])
+        apply_increment(self.cor.ut, self.cor.Q, inc)
+        self.plates.z += a * d[self.n:, 2]
+
+def plates_for(z_bottom: float, z_top: float) -> list:
+    """Two plates: fixed bottom (yarns above) and top (yarns below), both displacement-controlled."""
+    return [Plate(z=z_bottom, normal=1, displacement=0.0, name="bottom"),
+            Plate(z=z_top, normal=-1, displacement=0.0, name="top")]

@@ -1,0 +1,253 @@
+"""Assembly, evaluation and energy bookkeeping of :class:`~homtex.contact.incremental.IncrementalSolver`
+(a mixin: the solver's state lives there).
+
+The free-DOF system is :class:`~homtex.analysis.tangent.FreeSystem` with the node pairs of
+active contacts added to its pattern (it only grows; a contact block outside it rebuilds it),
+the element tangents of :class:`~homtex.analysis.corotational.Corotational` (symmetric part),
+the contact and friction blocks on the translations, and the pseudo-transient term M / delta on
+its diagonal. The ledger accumulates the external work (trapezoidal sum of the forces on
+prescribed DOFs, plates and loads times their motion), the pre-strain work, the friction
+dissipation and the stabilisation, and holds the strain and contact energy changes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numba
+import numpy as np
+
+from ..analysis.tangent import FreeSystem
+from ..fem.corotational_system import element_matvec_serial, spin_between
+from .friction import friction_potential
+
+__all__ = ["SystemMixin", "lag_change", "serial_numba"]
+
+
+class _StepFailed(Exception):
+    """A step that did not converge (the solver restores its state and raises SolverError)."""
+
+
+@contextlib.contextmanager
+def serial_numba(small: bool):
+    """numba on one thread for small frames (a parallel launch costs more than the work there)."""
+    if not small:
+        yield
+        return
+    old = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
+
+
+
+class SystemMixin:
+    """Pattern, assembly, evaluation and ledger of the large-motion step solver."""
+
+    # ------------------------------------------------------------------ pattern and assembly
+    def _pattern(self, nodes=None) -> None:
+        """(Re)build the free-DOF pattern with the node pairs of stencils ``nodes`` (c, S) added
+        to those it has (it only grows: contacts that were active once are likely to return)."""
+        c = self.scene.couplings(nodes)
+        N = self.N
+        have = self._coupled[:, 0] * N + self._coupled[:, 1]
+        new = c[:, 0] * N + c[:, 1]
+        if self.sys is not None and np.isin(new, have).all():
+            return
+        allk = np.union1d(have, new)
+        self._coupled = np.column_stack([allk // N, allk % N])
+        self.sys = FreeSystem(self.frame, self.mask, "ldl", couplings=self._coupled)
+        pn = self.scene.plate_block_nodes(np.arange(self.n * self.P))
+        self.plate_slots = self.sys.block_slots(pn) if len(pn) else np.zeros((0, 6, 6), dtype=np.int32)
+        self.info.patterns += 1
+
+    def _slots(self, nodes) -> np.ndarray:
+        """Slots of blocks over ``nodes`` (na, S), the pattern grown first where they need it."""
+        sl = self.sys.block_slots(nodes, strict=False)
+        if sl is None:
+            self._pattern(nodes)
+            sl = self.sys.block_slots(nodes)
+        return sl
+
+    def _search(self, x, margin=None) -> None:
+        self.scene.search(x, margin)
+        self.info.searches += 1
+
+    # ------------------------------------------------------------------ potential
+    def _evaluate(self, x_start, lag, hessian: bool, project: bool = False, eps_hessian: float = 0.0) -> dict:
+        """Forces, energies and (hessian) blocks at the current state; gradient g (N, 6).
+        ``project``: contact and friction blocks projected to PSD (else their exact Hessians).
+        ``eps_hessian``: friction blocks for this saturation slip if it is larger than the
+        model's (a predictor: friction is mobilised over the slip of the step, not eps_v)."""
+        s = self.prestrain_scale
+        fint = self.cor.evaluate_tangent(s) if hessian else self.cor.evaluate(s)
+        x = self.positions
+        z = self.plates.z
+        pc = self.scene.pairs(x, hessian, project=project)
+        pl = self.scene.plate_terms(x, z, hessian)
+        g = np.zeros((self.N, 6))
+        g[:self.n] = fint
+        g[:self.n, :3] += pc.grad + pl["grad"]
+        g[self.n:, 2] = pl["grad_plate"]
+        ev = {"U": float(self.cor.energy.sum()), "B": pc.energy + pl["energy"], "pairs": pc, "plates": pl,
+              "D": 0.0, "fric": [], "fint": fint}
+        for lg in lag:
+            if lg is None or not len(lg):
+                continue
+            fr = friction_potential(lg, x, x_start, self.eps_v, hessian=hessian, project=project)
+            if hessian and eps_hessian > self.eps_v:
+                fr.hess = friction_potential(lg, x, x_start, eps_hessian, hessian=True, project=project).hess
+            ev["D"] += fr.energy
+            ev["fric"].append((lg, fr))
+            g[:self.n, :3] += fr.grad
+        ev["g_contact"] = g[:, :3].copy()
+        ev["g_contact"][:self.n] -= fint[:, :3]
+        g[:self.n] -= self.load_scale * self.f_loads
+        g[self.n:, 2] -= self.plate_force
+        ev["g"] = g
+        ev["Pi"] = ev["U"] + ev["B"] + ev["D"]
+        return ev
+
+    def _assemble(self, ev) -> None:
+        """Beam tangent (symmetric part) plus the contact and friction blocks into the free system."""
+        sys = self.sys
+        sys.assemble(self.cor.Ke)
+        if self.M is None:
+            self.M = self._lumped()
+        pc, pl = ev["pairs"], ev["plates"]
+        # slots first: a block outside the pattern rebuilds it (and the beam part with it)
+        slots = [self._slots(pc.hess_nodes) if pc.n_active else None]
+        fric = ev["fric"]
+        slots += [self._friction_slots(lg) for lg, _ in fric]
+        if self.sys is not sys:
+            sys = self.sys
+            sys.assemble(self.cor.Ke)
+        if pc.n_active:
+            sys.add_blocks(pc.hess, slots[0])
+        if len(pl["active"]):
+            sys.add_blocks(pl["blocks"], self.plate_slots[pl["active"]])
+        for (lg, fr), sl in zip(fric, slots[1:]):
+            sys.add_blocks(fr.hess, sl)
+
+    def _friction_slots(self, lg):
+        cached = getattr(lg, "slots", None)
+        if cached is None or cached[0] is not self.sys:
+            sl = self._slots(lg.nodes)
+            lg.slots = (self.sys, sl)
+        return lg.slots[1]
+
+    def _hess_times(self, ev, d) -> np.ndarray:
+        """(N, 6) H d for a prescribed increment d (N, 6): beam tangent and contact blocks."""
+        out = np.zeros((self.N, 6))
+        if np.any(d[:self.n]):
+            p = self.cor.asm.pattern
+            tmp = np.empty((self.n, 6))
+            element_matvec_serial(p.node_ptr, p.inc_elem, p.inc_end, self.frame.elements, self.cor.Ke,
+                                  np.ascontiguousarray(d[:self.n]), tmp)
+            out[:self.n] = tmp
+        d3 = d[:, :3]
+        pc, pl = ev["pairs"], ev["plates"]
+        blocks = [(pc.hess, pc.hess_nodes)] if pc.n_active else []
+        if len(pl["active"]):
+            blocks.append((pl["blocks"], self.scene.plate_block_nodes(pl["active"])))
+        blocks += [(fr.hess, lg.nodes) for lg, fr in ev["fric"] if len(lg)]
+        for H, nodes in blocks:
+            v = d3[nodes].reshape(len(nodes), -1)
+            hv = np.einsum("rij,rj->ri", H, v).reshape(len(nodes), -1, 3)
+            np.add.at(out[:, :3], nodes.ravel(), hv.reshape(-1, 3))
+        return out
+
+    def _lumped(self) -> np.ndarray:
+        """M (nf,): |diagonal| of the beam tangent on the free DOFs (plates: the mean of the
+        translations), floored; frozen for the step."""
+        d = np.abs(self.sys.diagonal())
+        dof = self.free
+        node = dof // 6
+        trans = (node < self.n) & (dof % 6 < 3)
+        mean_t = float(d[trans].mean()) if trans.any() else 1.0
+        d = np.where(node >= self.n, mean_t, d)
+        return np.maximum(d, 1e-9 * float(d.max(initial=1.0)))
+
+    def _factor(self, it, shrink: bool = True) -> bool:
+        """Factor H + M / delta; ``shrink``: shrink delta until no negative pivot remains (else
+        return whether the factor is positive definite)."""
+        base = self.sys.A.data.copy()
+        for _ in range(40):
+            self.sys.A.data[:] = base
+            self.sys.add_diagonal(self.M / self.delta)
+            self.sys.factor(inertia=True)
+            if self.sys.negative == 0:
+                return True
+            if not shrink:
+                self.sys.A.data[:] = base
+                return False
+            self.delta = max(self.delta / 4.0, 1e-12)
+        raise _StepFailed(f"the tangent stays indefinite at iteration {it} (delta {self.delta:.2e})")
+
+    # ------------------------------------------------------------------ energy ledger
+    def _start_ledger(self) -> None:
+        ev = self._evaluate(self.positions, [], hessian=False)
+        self.ledger = {"external_work": 0.0, "prestrain_work": 0.0, "dissipation": 0.0, "stabilization": 0.0,
+                       "U0": ev["U"], "B0": ev["B"], "strain_energy": 0.0, "contact_energy": 0.0}
+        self._react = self._reactions(ev)
+        self._prev = self.snapshot()
+        self._dUds = self._prestrain_rate()
+
+    def _reactions(self, ev) -> np.ndarray:
+        """(N, 6) forces the surroundings apply on prescribed DOFs and loaded DOFs (N, N mm)."""
+        g = ev["g"].copy()
+        g[:self.n] += self.load_scale * self.f_loads
+        g[self.n:, 2] += self.plate_force
+        r = np.where(self.mask.reshape(self.N, 6), g, 0.0)
+        r[:self.n] += self.load_scale * self.f_loads
+        r[self.n:, 2] += self.plate_force
+        return r
+
+    def _prestrain_rate(self) -> float:
+        f = self.frame
+        return float(np.sum(self.cor.forces[:, 6] * f.length * f.prestrain))
+
+    def _account(self, info, snap) -> None:
+        ev = info.extra["ev"]
+        react = self._reactions(ev)
+        du = np.zeros((self.N, 6))
+        du[:self.n, :3] = self.cor.ut - snap[0]
+        spin_between(self.cor.Q, snap[1], du[:self.n, 3:])
+        du[self.n:, 2] = self.plates.z - snap[2]
+        L = self.ledger
+        L["external_work"] += 0.5 * float(np.sum((self._react + react) * du))
+        rate = self._prestrain_rate()
+        L["prestrain_work"] += 0.5 * (self._dUds + rate) * (self.prestrain_scale - snap[4])
+        L["dissipation"] += info.dissipation
+        L["stabilization"] += info.stabilization
+        L["strain_energy"] = ev["U"] - L["U0"]
+        L["contact_energy"] = ev["B"] - L["B0"]
+        self._react, self._dUds = react, rate
+        info.extra["reactions"] = react
+
+    def balance(self) -> float:
+        """(W_ext + W_prestrain - dU - dB - D - S) / max(|W_ext + W_prestrain|, tiny)."""
+        L = self.ledger
+        w = L["external_work"] + L["prestrain_work"]
+        rest = w - L["strain_energy"] - L["contact_energy"] - L["dissipation"] - L["stabilization"]
+        return float(rest / max(abs(w), 1e-300))
+
+
+
+def lag_change(old, new, n) -> float:
+    """Relative change of the lagged normal force per node between two lags (pairs, plates)."""
+    def per_node(lag):
+        out = np.zeros(n)
+        for lg in lag:
+            if lg is None or not len(lg):
+                continue
+            w = np.abs(lg.lam[:, :, None] * lg.coef).sum(axis=1)         # (rows, S)
+            np.add.at(out, lg.nodes.ravel(), w.ravel())
+        return out
+    a, b = per_node(old), per_node(new)
+    scale = max(float(np.abs(b).max(initial=0.0)), 1e-300)
+    return float(np.abs(a - b).max(initial=0.0) / scale)
+
+
