@@ -366,7 +366,7 @@ def test_every_argument_is_documented_with_its_default():
             text = a.help % {"default": a.default}
             assert "default" in text or a.required or not a.option_strings, (name, a.dest, text)
             if a.option_strings and a.type is not None and a.dest not in ("seed", "steps", "sel"):
-                assert any(u in text for u in ("mm", "fraction", "%")), (name, a.dest, text)
+                assert any(u in text for u in ("mm", "fraction", "%", "dimensionless")), (name, a.dest, text)
 
 
 def test_heartbeat_reports_a_long_block(caplog):
@@ -383,3 +383,24 @@ def test_heartbeat_reports_a_long_block(caplog):
     msgs = [r.getMessage() for r in caplog.records]
     assert not any("quick thing" in m for m in msgs)
     assert sum("... long thing" in m for m in msgs) >= 3 and any("long thing: done" in m for m in msgs)
+
+
+def test_compress_with_the_large_motion_engine_and_friction(tmp_path, capsys):
+    """``--geometry nonlinear --friction MU`` gives the API's large-motion curve (friction recorded,
+    energy balanced); friction with the linear model is a usage error, not a silent zero."""
+    import homtex
+
+    spacer = "cells/spacer_20mm.toml"
+    out = tmp_path / "nl"
+    assert main(["compress", spacer, "--strain", "0.02", "--steps", "2", "--geometry", "nonlinear",
+                 "--friction", "0.2", "--out", str(out)]) == 0
+    with xr.open_dataset(out / "spacer_20mm_compression_nonlinear.nc") as ds:
+        api = homtex.compress(homtex.load_cell(spacer), strain=0.02, steps=2, geometry="nonlinear",
+                              contact=homtex.Contact(friction=0.2))
+        np.testing.assert_allclose(ds.stress.values, api.stress.values, rtol=1e-8)
+        assert ds.attrs["geometry"] == "nonlinear" and ds.attrs["friction_max"] == 0.2
+        assert float(ds.friction_energy[-1]) > 0 and abs(float(ds.energy_balance[-1])) < 0.01
+    assert (out / "spacer_20mm_compression_nonlinear.png").exists()
+    assert main(["compress", spacer, "--friction", "0.2", "--out", str(tmp_path / "lin")]) == 2
+    assert "--geometry nonlinear" in capsys.readouterr().err
+    assert not (tmp_path / "lin" / "spacer_20mm_compression.nc").exists()

@@ -3,10 +3,10 @@
     homtex run      [--out DIR] [--quick]       the main job (README's first command)
     homtex cell     CELL [--out DIR]            summary and picture of a unit cell
     homtex homogenize CELL [--solver S] [--out DIR]   effective stiffness of a periodic cell
-    homtex compress CELL [--strain 0.3] [--steps 20] [--out DIR]
+    homtex compress CELL [--strain 0.3] [--steps 20] [--geometry linear|nonlinear] [--friction MU] [--out DIR]
     homtex seam     CELL --distance D [--prestrain EPS] [--method yarn|foundation] [--out DIR]
     homtex macro    CELL [--distance D] [--steps 50 | --curve FILE.nc] [--strain 0.5] [--scatter S] ...
-    homtex study    STUDY.toml --out DIR [--scheduler ADDRESS]
+    homtex study    STUDY.toml --out DIR [--scheduler ADDRESS] [--workers N] [--keep-failed] [--connect-timeout S]
     homtex plot     FILE.nc [--out IMAGE] [--var NAME] [--sel DIM=VALUE]
 
 CELL is a cell file path (.toml) or a shipped cell name (spacer_20mm, octet, ...).
@@ -68,8 +68,11 @@ def cmd_homogenize(args) -> None:
 
 
 def cmd_compress(args) -> None:
+    if args.friction and args.geometry == "linear":
+        raise InputError(f"--friction {args.friction:g} needs --geometry nonlinear: the linear contact solve is "
+                         "frictionless")
     ds, paths = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
-                              steps=args.steps)
+                              steps=args.steps, geometry=args.geometry, friction=args.friction)
     _say(str(ds))
     for p in paths:
         _say(f"  wrote {p}")
@@ -276,6 +279,13 @@ def build_parser() -> Parser:
     s.add_argument("--steps", type=count, default=20, metavar="N",
                    help="load steps, integer >= 1; contact is re-linearised per step, so more steps are more "
                         "accurate (default: %(default)s; the main job uses 50 to 50 %%)")
+    s.add_argument("--geometry", choices=("linear", "nonlinear"), default="linear",
+                   help="linear: small rotations, frictionless contact, valid to about 30 %%; nonlinear: the "
+                        "large-motion engine (co-rotational beams, barrier contact, friction), to 70 %% and beyond "
+                        "(default: %(default)s)")
+    s.add_argument("--friction", type=non_negative, default=None, metavar="MU",
+                   help="Coulomb coefficient (dimensionless) of every yarn-yarn and yarn-plate contact, >= 0 "
+                        "(needs --geometry nonlinear; default: the cell file's [contact] table, else 0)")
     _add_out(s, "results/compress")
     s.set_defaults(func=cmd_compress)
 

@@ -105,11 +105,13 @@ def homogenize_cell(path, out: Path, *, solver="amg"):
     return ds, [nc, png]
 
 
-def compress_cell(path, out: Path, *, strain=0.3, steps=20):
-    """Yarn-level compression between rigid plates: ``<stem>_compression.nc/.png``."""
+def compress_cell(path, out: Path, *, strain=0.3, steps=20, geometry="linear", friction=None):
+    """Yarn-level compression between rigid plates: ``<stem>_compression.nc/.png``
+    (``<stem>_compression_nonlinear`` with the large-motion engine)."""
     cell = load(path)
-    curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True,
-                                        name=f"{stem_of(cell)}_compression")
+    name = f"{stem_of(cell)}_compression" + ("" if geometry == "linear" else "_nonlinear")
+    curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True, name=name,
+                                        geometry=geometry, friction=friction)
     log.info(f"modulus {summ['modulus_kPa']:.1f} kPa; stress at 10/25/40 %: {summ['stress_10_kPa']:.2f} / "
              f"{summ['stress_25_kPa']:.2f} / {summ['stress_40_kPa']:.2f} kPa; status {curve.attrs['status']}")
     return curve, list(paths.values())

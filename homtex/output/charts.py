@@ -119,10 +119,18 @@ def compression_chart(curve, *, plate_area: float = PLATE_AREA_MM2):
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.6))
     e, s = 100 * curve.strain.values, curve.stress.values
     ok = e <= 100 * valid + 1e-9
-    _shade_validity(ax[0], 100 * valid)
-    _tag(ax[0], _units(curve, "stress", "kPa"), "compressive stress",
-         ax[0].plot(e[ok], s[ok], "o-", ms=3, color="tab:blue", label="yarn level"),
-         ax[0].plot(e[~ok], s[~ok], "o--", ms=3, color="tab:red", label="beyond 30 % (large rotations ignored)"))
+    # the large-motion engine (validity 100 %) has no small-rotation range to shade
+    large = valid >= 1.0
+    if not large:
+        _shade_validity(ax[0], 100 * valid)
+    label = "yarn level"
+    if large:
+        mu = curve.attrs.get("friction_max")
+        label += ", large motion" + ("" if mu is None else f", friction {float(mu):g}")
+    lines = ax[0].plot(e[ok], s[ok], "o-", ms=3, color="tab:blue", label=label)
+    if (~ok).any():
+        lines += ax[0].plot(e[~ok], s[~ok], "o--", ms=3, color="tab:red", label="beyond 30 % (large rotations ignored)")
+    _tag(ax[0], _units(curve, "stress", "kPa"), "compressive stress", lines)
     per_kpa = plate_area * 1e-3          # N per kPa on the plate
     lc = LOAD_CELL_N / per_kpa
     _tag(ax[0], "kPa", None, ax[0].axhline(lc, color="k", lw=0.9, ls="--",
@@ -132,7 +140,7 @@ def compression_chart(curve, *, plate_area: float = PLATE_AREA_MM2):
     sec.set_ylabel("force on a 121 cm$^2$ plate, N")
     ax[0].set(xlabel="compression (plate displacement / thickness), %", xlim=(0, max(e.max(initial=0), 1) * 1.02),
               ylim=(0, None))
-    mod = curve.attrs.get("modulus_kPa")
+    mod = None if large else curve.attrs.get("modulus_kPa")
     ax[0].set_title(f"{cell}: compression between rigid plates" + (f", E_c = {float(mod):.0f} kPa" if mod else ""),
                     fontsize=9)
     ax[0].legend(fontsize=7, loc="upper left")
@@ -140,12 +148,14 @@ def compression_chart(curve, *, plate_area: float = PLATE_AREA_MM2):
         ge = curve["group_energy"]
         for g in ge.group.values:
             _tag(ax[1], "N mm", None, ax[1].plot(e, ge.sel(group=g).values, label=f"yarn system {g}"))
-    for k in ("bending_y", "bending_z", "axial", "torsion", "shear", "contact_energy"):
-        if k in curve:
+    for k in ("bending_y", "bending_z", "axial", "torsion", "shear", "contact_energy", "friction_energy",
+              "stabilization_energy"):
+        if k in curve and np.any(np.asarray(curve[k].values) > 0):
             _tag(ax[1], _units(curve, k, "N mm"), None, ax[1].plot(e, curve[k].values, ":", lw=1, label=k))
-    ax[1].set(xlabel="compression, %", ylabel="strain energy per cell, N mm", yscale="log")
+    ax[1].set(xlabel="compression, %", ylabel="energy per cell, N mm", yscale="log")
     ax[1].set_title(f"{cell}: energy by yarn system (solid) and mechanism (dotted)", fontsize=9)
-    _shade_validity(ax[1], 100 * valid, label=False)
+    if not large:
+        _shade_validity(ax[1], 100 * valid, label=False)
     if ax[1].get_legend_handles_labels()[0]:
         ax[1].legend(fontsize=7, ncol=2)
     fig.tight_layout()
