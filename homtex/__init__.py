@@ -11,7 +11,7 @@ from importlib import import_module
 
 from ._version import __version__
 from .config import get_options, set_options
-from .errors import CellError, InputError, SolverError, StudyError
+from .errors import CellError, InputError, SolverError, StrainWarning, StudyError
 from .model.frame import Frame
 from .model.results import StaticResult, Status
 from .model.sections import YarnType
@@ -38,7 +38,8 @@ _LAZY = {
     "Corotational": ".analysis.nonlinear",
 }
 
-__all__ = ["CellError", "Frame", "InputError", "SolverError", "StaticResult", "Status", "StudyError", "YarnType",
+__all__ = ["CellError", "Frame", "InputError", "SolverError", "StaticResult", "Status", "StrainWarning", "StudyError",
+           "YarnType",
            "__version__", "get_options", "set_options", *_LAZY]
 
 

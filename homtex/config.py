@@ -4,8 +4,8 @@ Every entry point that takes a ``solver`` or ``tol`` reads its default here when
 is left at None, so a default lives in one place::
 
     homtex.set_options(static_solver="direct")            # from now on
-    with homtex.set_options(compress_solver="amg", tol=1e-8):
-        homtex.compress(cell, strain=0.3)                 # only inside the block
+    with homtex.set_options(static_solver="direct", tol=1e-8):
+        homtex.solve_static(frame, fixed, loads)           # only inside the block
 
 Options (validated when set; an unknown name or a bad value is an InputError):
 

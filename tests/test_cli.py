@@ -11,6 +11,7 @@ import xarray as xr
 from homtex.app.cli import main
 
 
+@pytest.mark.slow
 def test_run_quick_writes_the_paper_study(tmp_path):
     """The main job (quick variant) end to end: every stage writes a self-describing Dataset and
     a chart, and the numbers in them obey the physics they claim."""

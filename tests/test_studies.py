@@ -53,6 +53,7 @@ def test_layout():
         assert f"{p.parent.name}/{p.name}" in readme, f"{_id(p)} is not listed in studies/README.md"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("script", SCRIPTS, ids=_id)
 def test_quick_mode(script, tmp_path):
     for mod in NEEDS.get(script.name, ()):
