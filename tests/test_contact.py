@@ -406,3 +406,17 @@ def test_force_drops_are_flagged_with_where_and_how_much():
     wiggle[6] = 11.9                                   # 0.8 % below the force reached: below the threshold
     ds = flag_force_drops(curve(wiggle))
     assert 0 < ds.attrs["force_drop_max"] < 0.02 and "check" not in ds.attrs
+
+
+def test_an_iterative_solver_too_coarse_for_the_gap_tolerance_says_so():
+    """AMG-CG at tol 1e-8 resolves displacements to ~1e-9 mm, not the augmented Lagrangian's default
+    gap accuracy (1e-9 r = 1.1e-10 mm here): the failed curve names the solver and the remedies,
+    and the remedy it names (a larger gap_tol) works."""
+    cell = homtex.load_cell("spacer_20mm")
+    with homtex.set_options(compress_solver="amg", tol=1e-8):
+        bad = homtex.compress(cell, strain=0.04, steps=2)
+        good = homtex.compress(cell, strain=0.04, steps=2, contact=homtex.Contact(gap_tol=1e-7))
+    assert bad.attrs["status"] == "failed" and "solver='direct'" in bad.attrs["status_detail"]
+    ref = homtex.compress(cell, strain=0.04, steps=2)
+    assert good.attrs["status"] == "ok"
+    np.testing.assert_allclose(good.stress.values, ref.stress.values, rtol=1e-4)

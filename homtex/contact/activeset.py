@@ -155,11 +155,21 @@ class ActiveSets:
                 raise SolverError(
                     f"augmented Lagrangian: gaps did not close after {outer} multiplier updates (largest gap "
                     f"error {viol:.3e} mm at {self._name(rows, q)}, tolerance {self.gtol:.1e} mm; penalty "
-                    f"{k:.3g} N/mm); the contact is held rigidly or the constraints contradict each other")
+                    f"{k:.3g} N/mm); the contact is held rigidly or the constraints contradict each other"
+                    + self._solver_hint())
         if cont.enforcement == "penalty":
             self._check_penetration(rows, h, active)
         active = lam > 0.0
         return x, lam, h, active, iters, outer
+
+    def _solver_hint(self) -> str:
+        """With an iterative linear solver, the gaps can only close as far as its tolerance resolves
+        the displacements: say so (the failure is then the solver's accuracy, not the contact)."""
+        if self.solver == "direct":
+            return ""
+        return (f"; or the iterative linear solver ({self.solver!r}, tol {self.tol:g}) cannot resolve gaps of "
+                f"{self.gtol:.1e} mm: use solver='direct' (the default for contact), a smaller tol, or a larger "
+                "Contact(gap_tol=...)")
 
     def _check_penetration(self, rows, h, active):
         """Penalty enforcement: raise when an active contact overlaps by more than
@@ -285,7 +295,7 @@ class ActiveSets:
                     f"augmented Lagrangian: gaps did not close after {it} multiplier updates "
                     f"(largest |gap| {err:.3e} mm at {self._name(rows, q)}, tolerance {self.gtol:.1e} mm); "
                     f"the contact is held rigidly (both sides supported?) or the penalty {k:.3g} N/mm is far "
-                    f"too small", report=rep)
+                    f"too small" + self._solver_hint(), report=rep)
         lam = np.zeros(rows.M)
         lam[ia] = la
         return x, lam, g + rows.C @ x, it, rep
