@@ -291,3 +291,49 @@ def test_a_two_periodic_cell_and_its_two_by_one_supercell_agree_before_buckling(
     assert one.attrs["status"] == two.attrs["status"] == "ok"
     assert float(two.attrs["area_mm2"]) == pytest.approx(2 * float(one.attrs["area_mm2"]))
     np.testing.assert_allclose(two.stress.values, one.stress.values, rtol=1e-4)
+
+
+# ----------------------------------------------------------------------------------------
+def stitch_over_a_yarn(theta=0.3, leg=2.0, n_arc=16, n_leg=12, r=0.05, Rc=0.5, E=1e4, eps0=0.05, bf=1e-4):
+    """A thread (pre-strain eps0) wrapped by +-theta over a fixed stiff yarn (along y, radius Rc),
+    resting on it at the barrier's gap, with straight tangent legs of length ``leg`` whose ends
+    are held. Returns the solver, the thread's EA, sin(theta) and its element count."""
+    rho = Rc + r + 0.01 * r
+    ph = np.linspace(-theta, theta, n_arc + 1)
+    arc = np.c_[rho * np.sin(ph), np.zeros_like(ph), rho * np.cos(ph)]
+    s = leg * np.arange(1, n_leg + 1) / n_leg
+    dR = np.array([np.cos(theta), 0.0, -np.sin(theta)])
+    dL = np.array([-np.cos(theta), 0.0, -np.sin(theta)])
+    thread = np.vstack([arc[0] + s[::-1, None] * dL, arc, arc[-1] + s[:, None] * dR])
+    m = len(thread) - 1
+    nodes = np.vstack([thread, [[0, -3.0, 0], [0, 3.0, 0]]])
+    el = np.vstack([np.c_[np.arange(m), np.arange(1, m + 1)], [[m + 1, m + 2]]])
+    fr = homtex.Frame(nodes, el, radius=np.r_[np.full(m, r), Rc], E=np.r_[np.full(m, E), 1e6], nu=0.3,
+                      yarn=np.r_[np.zeros(m, int), 1], ref=np.r_[np.tile([0, 1.0, 0], (m, 1)), [[1.0, 0, 0]]],
+                      bending_factor=np.r_[np.full(m, bf), 1.0], prestrain=np.r_[np.full(m, eps0), 0.0])
+    fixed = {i: [1, 3, 5] for i in range(1, m)} | {0: "all", m: "all", m + 1: "all", m + 2: "all"}
+    sol = IncrementalSolver(fr, fixed, None, [], homtex.Contact())
+    return sol, E * np.pi * r ** 2, np.sin(theta), m
+
+
+def test_a_prestrained_stitch_pulls_on_the_yarn_it_wraps_by_two_T_sin_theta():
+    """The seam's physics with the large-motion engine: a thread's pre-strain ramped 0 -> eps0 over
+    a fixed yarn; frictionless, it carries the same T = EA eps0 s everywhere (its length is held by
+    the yarn and its ends) and presses on the yarn with 2 T sin(theta); all of the pre-strain's
+    work is strain and barrier energy (nothing is dissipated or absorbed)."""
+    eps0 = 0.05
+    sol, EA, sin_t, m = stitch_over_a_yarn(eps0=eps0)
+    for s in (0.0, 0.25, 0.5, 1.0):
+        info = sol.solve(prestrain_scale=s)
+        if s == 0.0:
+            start = dict(sol.ledger)            # the solver starts at scale 1: count the ramp 0 -> 1
+            continue
+        T = EA * eps0 * s
+        N = sol.cor.forces[:m, 6]
+        assert np.abs(N).min() == pytest.approx(T, rel=2e-3) and np.abs(N).max() == pytest.approx(T, rel=2e-3)
+        press = info.extra["reactions"][[m + 1, m + 2], 2].sum()        # the supports hold the yarn up
+        assert press == pytest.approx(2 * T * sin_t, rel=5e-3)
+    d = {k: sol.ledger[k] - start[k] for k in start}
+    assert d["dissipation"] == 0.0 and d["stabilization"] < 1e-8 * abs(d["prestrain_work"])
+    # the ramp's work on the thread is what it stores (strain, barrier): 1e-3 of it
+    assert d["prestrain_work"] == pytest.approx(d["strain_energy"] + d["contact_energy"], rel=1e-3)
