@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .narrow import _clamp01
 
 # ipctk's EdgeEdgeDistanceType numbering, indexed by the (s, t) state: 0 = fixed at 0,
 # 1 = fixed at 1, 2 = free.  CASE_EE[s_state, t_state]
@@ -44,15 +45,6 @@ PE_CASE_NAMES = ("P_E0", "P_E1", "P_E")
 # relative threshold on |ea x eb|^2 / (|ea|^2 |eb|^2) below which the line-line formula is not
 # tried (the closest points of exactly parallel segments are found on the boundary)
 PARALLEL_EPS = 1e-12
-
-
-@njit(cache=True, inline="always")
-def _clamp01(x):
-    if x < 0.0:
-        return 0.0
-    if x > 1.0:
-        return 1.0
-    return x
 
 
 @njit(cache=True)

@@ -46,6 +46,7 @@ from .potential import (
     _parallel,
     _phi,
     _positions,
+    _scatter,
     _term_params,
     _term_weights,
     pair_gaps,
@@ -220,15 +221,6 @@ def _friction_par(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, nch,
                         (ch + 1) * npair // nch, e_out, dis_out, slip_out, g_out, H_out)
 
 
-@njit(cache=True)
-def _scatter_rows(nodes, g, out):
-    for r in range(nodes.shape[0]):
-        for k in range(nodes.shape[1]):
-            nd = nodes[r, k]
-            for i in range(3):
-                out[nd, i] += g[r, 3 * k + i]
-
-
 # ----------------------------------------------------------------------------------------
 @dataclass
 class FrictionLag:
@@ -386,7 +378,7 @@ def friction_potential(lag: FrictionLag, x, x_start, eps_v: float, plate_motion=
         else:
             _friction_ser(*args, e, dis, slip, g, H)
     grad = np.zeros_like(x)
-    _scatter_rows(lag.nodes, g, grad)
+    _scatter(lag.nodes, np.arange(lag.nodes.shape[0]), g, grad)
     pf = np.zeros((nplates, 3))
     if nplates:
         sel = np.flatnonzero(lag.plate >= 0)

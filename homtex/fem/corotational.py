@@ -58,33 +58,11 @@ def expmap(v):
 
 @njit(cache=True)
 def logmap(R):
-    """Rotation vector (3,) of a rotation matrix (angle < pi), via the quaternion (robust near 0)."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    q0 = 0.5 * np.sqrt(max(1.0 + tr, 0.0))
-    if q0 > 0.5:                    # angle < 120 degrees: the direct formula is well conditioned
-        f = 0.25 / q0
-        qv = np.array([(R[2, 1] - R[1, 2]) * f, (R[0, 2] - R[2, 0]) * f, (R[1, 0] - R[0, 1]) * f])
-    else:                           # Shepperd: largest diagonal element
-        k = 0
-        if R[1, 1] > R[k, k]:
-            k = 1
-        if R[2, 2] > R[k, k]:
-            k = 2
-        i, j = (k + 1) % 3, (k + 2) % 3
-        qk = 0.5 * np.sqrt(max(1.0 + R[k, k] - R[i, i] - R[j, j], 1e-300))
-        f = 0.25 / qk
-        qv = np.empty(3)
-        qv[k] = qk
-        qv[i] = (R[i, k] + R[k, i]) * f
-        qv[j] = (R[j, k] + R[k, j]) * f
-        q0 = (R[j, i] - R[i, j]) * f
-        if q0 < 0.0:
-            q0 = -q0
-            qv = -qv
-    s = np.sqrt(qv[0] * qv[0] + qv[1] * qv[1] + qv[2] * qv[2])
-    if s < 1e-12:
-        return 2.0 * qv / q0
-    return (2.0 * np.arctan2(s, q0) / s) * qv
+    """Rotation vector (3,) of a rotation matrix (angle < pi), via the quaternion (robust near 0);
+    :func:`_logmap_into` without an output array."""
+    out = np.empty(3)
+    _logmap_into(R, out)
+    return out
 
 
 @njit(cache=True, inline="always")
@@ -162,7 +140,8 @@ def _dot3(a, b):
 
 @njit(cache=True, inline="always")
 def _logmap_into(R, out):
-    """out (3,) = log R (the allocation-free twin of :func:`logmap`)."""
+    """out (3,) = log R: the quaternion (direct formula below 120 degrees, else Shepperd's largest
+    diagonal), then the angle from atan2 (robust near 0)."""
     tr = R[0, 0] + R[1, 1] + R[2, 2]
     q0 = 0.5 * np.sqrt(max(1.0 + tr, 0.0))
     if q0 > 0.5:
