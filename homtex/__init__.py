@@ -34,7 +34,7 @@ _LAZY = {
     "macro_curve": ".macro",
     "run_study": ".study",
     "Lookup": ".lookup",
-    "solve_nonlinear": ".analysis.nonlinear",
+    "solve_nonlinear": ".api",
     "Corotational": ".analysis.nonlinear",
 }
 

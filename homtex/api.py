@@ -1,15 +1,20 @@
-"""The public entry points that dispatch to a stage: ``solve_static`` (with or without contact)
-and ``compress`` (linear or co-rotational beams). They check their arguments, read the
-defaults of :mod:`homtex.config` and hand over; the work is done in the stage's room."""
+"""The public entry points that dispatch to a stage: ``solve_static`` (with or without contact),
+``solve_nonlinear`` (large rotations; with contact the large-motion engine) and ``compress``
+(linear or co-rotational beams). They check their arguments, read the defaults of
+:mod:`homtex.config` and hand over; the work is done in the stage's room."""
 
 from __future__ import annotations
 
 import numpy as np
 import xarray as xr
 
+from .analysis.nonlinear import CONTROLS, NonlinearResult
+from .analysis.nonlinear import solve_nonlinear as _solve_frame
 from .analysis.static import solve_linear
 from .config import option
 from .contact.compress import CompressionTest, run_compression
+from .contact.engine import run_engine
+from .contact.incremental import NonlinearSettings
 from .contact.options import Contact
 from .contact.solver import solve_contact
 from .errors import InputError
@@ -19,7 +24,7 @@ from .model.frame import Frame
 from .model.results import StaticResult
 from .validate import check_choice, check_int, check_number
 
-__all__ = ["compress", "solve_static"]
+__all__ = ["compress", "solve_nonlinear", "solve_static"]
 
 GEOMETRIES = ("linear", "nonlinear")
 
@@ -177,3 +182,119 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     return run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
                            tol=option("tol", tol), maxiter=maxiter, max_cuts=int(max_cuts),
                            progress=option("progress", progress), geometry=geometry, friction_spec=friction_spec)
+
+
+def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = None, plates=None,
+                    prestrain: float | None = None, initial: NonlinearResult | None = None, control: str = "load",
+                    steps: int = 10, tol: float | None = None, atol: float | None = None, max_iter: int | None = None,
+                    max_cuts: int | None = None, geometric: str = "full", solver: str | None = None,
+                    perturbation: float = 1e-2, arc_length: float | None = None, monitor=None,
+                    progress: bool | None = None) -> NonlinearResult:
+    """Large-rotation static solve of a frame, following the load path; with ``contact`` the
+    large-motion engine (yarns that touch, slide with friction and never pass through each other).
+
+    The load factor lambda goes from 0 to 1 and scales the drivers of the path: the dead loads
+    ``loads``, the prescribed motions of ``fixed``, the plates' motions and forces and (with the
+    engine) the pre-strain ramp ``prestrain``.
+
+    Parameters
+    ----------
+    frame : homtex.Frame, or a homtex Cell (its frame, and its ``[contact]`` friction table when
+        ``contact.friction`` is None).
+    fixed : supports: node -> "all" | [DOFs] (held) | {DOF: value} (prescribed at lambda = 1: mm, or
+        rad as a spin about the fixed axis). With ``initial``, motions count from the initial state
+        and held DOFs stay where it left them.
+    loads : node -> (Fx, Fy, Fz, Mx, My, Mz), N and N mm (dead loads at lambda = 1). With ``initial``
+        they are added to the loads acting in the initial state.
+    contact : homtex.Contact: run the large-motion engine (co-rotational beams + IPC barrier between
+        yarn surfaces and against the plates + lagged Coulomb friction + pseudo-transient
+        continuation; every state intersection-free). None: frames without contact (the
+        path-following solver with limit points, bifurcations and arc length).
+    plates : homtex.Plate list (rigid planes normal to z): ``z`` the start height, ``displacement``
+        its motion at lambda = 1 (mm) or ``force`` pressing it on the yarns at lambda = 1 (N). Needs
+        the engine (``contact``; ``Contact()`` when plates are given alone). With ``initial`` and
+        ``plates=None`` the initial state's plates stay where they are.
+    prestrain : scale of the frame's pre-strain at lambda = 1 (engine): ramped from its current value
+        (0 on a fresh solve when given; without it a fresh solve has the pre-strain acting in full
+        from the start, and a continued one keeps its scale).
+    initial : a NonlinearResult of an earlier engine solve on the same frame: continue from its state
+        (positions, rotations, pre-strain scale, loads, plates, touching pairs, energy ledger); supports,
+        loads and plates may be added or changed. Sewing then pressing is two calls.
+    control : "load" (default) / "displacement": lambda in ``steps`` equal steps, cut and regrown
+        as needed; "arclength" (frames without contact): Crisfield's arc length through limit points.
+    steps : requested steps (>= 1); the engine halves a step that fails, or whose energy ledger does
+        not close within 1 % of its work, up to ``max_cuts`` times.
+    tol : equilibrium tolerance relative to the forces (default 1e-9 without contact, 1e-8 for the
+        engine). atol : absolute tolerance (frames without contact). max_iter : Newton iterations
+        per step (default 15; engine 80). max_cuts : halvings of a step (default 10).
+    geometric, solver, perturbation, arc_length : see :func:`homtex.analysis.nonlinear.solve_nonlinear`
+        (frames without contact).
+    monitor : node indices whose displacements and forces the path records (default: the loaded
+        nodes and those with prescribed motions).
+    progress : progress reports of the engine (default: option ``progress``).
+
+    Returns
+    -------
+    NonlinearResult: ``u`` (n, 6), ``x`` (n, 3), ``reactions``, ``path`` (xarray Dataset over
+    ``step``; with the engine also ``contact_energy``, ``friction_energy``, ``stabilization_energy``,
+    ``external_work``, ``prestrain_work``, ``energy_balance``, ``plate_z`` and ``plate_force`` per
+    plate, contacts; ``attrs["status"]`` "ok", or "flagged" with ``status_detail`` when the energy
+    ledger is off by more than 1 % or the stabilisation took more than 1 % of the driven work) and,
+    with the engine, ``state`` to continue from.
+
+    Raises
+    ------
+    InputError for bad arguments or options the chosen solver does not have; SolverError for a step
+    that fails at every size (with the engine its ``result`` attribute holds the path up to it).
+    """
+    cell = None if isinstance(frame, Frame) else frame
+    fr = frame if cell is None else getattr(frame, "frame", None)
+    if not isinstance(fr, Frame):
+        raise InputError(f"frame must be a homtex.Frame or a homtex Cell, got {type(frame).__name__}")
+    if initial is not None and not isinstance(initial, NonlinearResult):
+        raise InputError(f"initial must be the NonlinearResult of an earlier solve, got {type(initial).__name__}")
+    engine = contact is not None or plates is not None or prestrain is not None or \
+        (initial is not None and initial.state is not None)
+    if not engine:
+        if initial is not None:
+            raise InputError("initial: this result comes from a solve without contact, which cannot be continued; "
+                             "continue solves of the large-motion engine (contact=homtex.Contact())")
+        return _solve_frame(fr, fixed, loads, control=control, steps=steps, tol=1e-9 if tol is None else tol,
+                            atol=atol, max_iter=15 if max_iter is None else max_iter,
+                            max_cuts=10 if max_cuts is None else max_cuts, geometric=geometric, solver=solver,
+                            perturbation=perturbation, arc_length=arc_length, monitor=monitor)
+    contact = Contact() if contact is None else contact
+    if not isinstance(contact, Contact):
+        raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
+    check_choice(control, "control", CONTROLS)
+    for name, value, what in (("control", control if control == "arclength" else None, "arc length"),
+                              ("atol", atol, "an absolute tolerance"), ("arc_length", arc_length, "an arc length"),
+                              ("solver", solver, "a choice of factorisation")):
+        if value is not None:
+            raise InputError(f"{name}={value!r}: the large-motion engine (contact) has no {what}; it steps the load "
+                             "factor with control='load' or 'displacement' (leave the option out)")
+    if geometric not in ("full", "consistent"):
+        raise InputError(f"geometric must be 'full' for the large-motion engine, got {geometric!r}")
+    if initial is not None and initial.state is None:
+        raise InputError("initial: this result comes from a solve without contact; only engine solves continue")
+    steps = check_int(steps, "steps", ge=1, le=100_000)
+    settings = NonlinearSettings()
+    if tol is not None:
+        settings.tol = check_number(tol, "tol", gt=0.0, lt=1.0)
+    if max_iter is not None:
+        settings.max_iter = check_int(max_iter, "max_iter", ge=1, le=10_000)
+    max_cuts = 10 if max_cuts is None else check_int(max_cuts, "max_cuts", ge=0, le=30)
+    if prestrain is not None:
+        prestrain = check_number(prestrain, "prestrain (scale of the frame's pre-strain)", ge=0.0, le=10.0)
+        if not np.any(fr.prestrain != 0.0):
+            raise InputError("prestrain: the frame has no pre-strain to scale (give the frame's elements a prestrain)")
+    if monitor is not None:
+        monitor = np.atleast_1d(np.asarray(monitor))
+        if not np.issubdtype(monitor.dtype, np.integer) or monitor.ndim != 1 or \
+                np.any((monitor < 0) | (monitor >= fr.n_nodes)):
+            raise InputError(f"monitor must be node indices in 0..{fr.n_nodes - 1}, got {monitor!r}")
+    spec = getattr(cell, "friction_spec", None) if cell is not None else None
+    friction_spec = spec() if callable(spec) and contact.friction is None else None
+    return run_engine(fr, fixed, loads, contact=contact, plates=plates, steps=steps, prestrain=prestrain,
+                      initial=None if initial is None else initial.state, friction_spec=friction_spec,
+                      max_cuts=max_cuts, settings=settings, monitor=monitor, progress=option("progress", progress))

@@ -46,6 +46,8 @@ class NonlinearResult:
     load_factor : lambda of the last state. stable : whether it is stable; negative_eigenvalues.
     critical_load_factor : first bifurcation or limit point met (nan if none).
     history : per state (load factor, Newton iterations, residual), as before the path existed.
+    state : the large-motion engine's state to continue from (``initial=`` of a later solve; None
+        without contact). plate_z : (P,) plate heights at the end (mm; empty without plates).
     """
 
     frame: Frame
@@ -61,6 +63,8 @@ class NonlinearResult:
     negative_eigenvalues: int = 0
     critical_load_factor: float = float("nan")
     history: list = field(default_factory=list)
+    state: object = None
+    plate_z: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def axial_force(self) -> np.ndarray:

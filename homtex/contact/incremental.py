@@ -55,7 +55,7 @@ from .potential import Enforcement
 
 log = logging.getLogger(__name__)
 
-__all__ = ["IncrementalSolver", "NonlinearSettings", "StepInfo"]
+__all__ = ["EngineState", "IncrementalSolver", "NonlinearSettings", "StepInfo"]
 
 
 @dataclass
@@ -85,6 +85,35 @@ class NonlinearSettings:
     delta_max: float = 1e12
     armijo: float = 1e-4
     predictor_slip: float = 0.1
+
+
+@dataclass
+class EngineState:
+    """A converged state of the large-motion engine to continue from (``initial=`` of
+    ``homtex.solve_nonlinear``): translations ``ut`` (n, 3, mm), rotations ``Q`` (n, 3, 3), the
+    pre-strain scale, the dead loads acting (n, 6; N, N mm), the plates (heights, normals, force
+    pressing each force-controlled plate on the yarns, NaN for displacement control), the touch
+    offsets of pairs that touched in the reference geometry, the PTC step and the energy ledger."""
+
+    n_nodes: int
+    n_elements: int
+    ut: np.ndarray
+    Q: np.ndarray
+    prestrain_scale: float
+    loads: np.ndarray
+    plate_z: np.ndarray
+    plate_normal: np.ndarray
+    plate_force: np.ndarray
+    touch: tuple
+    ledger: dict
+    delta: float = 1e12
+
+    def check(self, frame) -> None:
+        """InputError unless ``frame`` is the frame this state belongs to (same nodes and elements)."""
+        if frame.n_nodes != self.n_nodes or frame.n_elements != self.n_elements:
+            raise InputError(f"initial: the state belongs to a frame of {self.n_nodes} nodes and {self.n_elements} "
+                             f"elements, this one has {frame.n_nodes} and {frame.n_elements}; continue a solve on "
+                             "the frame it was computed on")
 
 
 @dataclass
@@ -120,10 +149,17 @@ class IncrementalSolver(SystemMixin):
     friction_spec : a cell file's friction (:meth:`homtex.Cell.friction_spec`), used when
         ``contact.friction`` is None.
     settings : :class:`NonlinearSettings`.
+    initial : an :class:`EngineState` of an earlier solve of the same frame to continue from
+        (positions, rotations, pre-strain scale, applied loads, the reference pairs' touch offsets,
+        the PTC step and the energy ledger); the loads at load factor 0 are then its loads (the
+        ``loads`` given here are added on top, scaled by the load factor).
+    prestrain_scale : the factor on the frame's pre-strain at the start (default 1, or the
+        initial state's).
     """
 
     def __init__(self, frame: Frame, fixed=None, loads=None, plates=(), contact: Contact | None = None, *,
-                 friction_spec: dict | None = None, settings: NonlinearSettings | None = None):
+                 friction_spec: dict | None = None, settings: NonlinearSettings | None = None,
+                 initial: EngineState | None = None, prestrain_scale: float | None = None):
         if not isinstance(frame, Frame):
             raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
         contact = Contact() if contact is None else contact
@@ -144,8 +180,10 @@ class IncrementalSolver(SystemMixin):
         self.plates = PlateState(z=np.array([float(p.z) for p in sc.plates]),
                                  normal=np.array([int(p.normal) for p in sc.plates]), force_controlled=fc)
         margin = contact.margin if contact.margin is not None else max(float(r.max()), 20.0 * ghat)
+        if initial is not None:
+            initial.check(frame)
         self.scene = ContactScene(frame, self.plates, enf, enf, friction_setup(frame, contact, friction_spec),
-                                  max(margin, 2.0 * ghat))
+                                  max(margin, 2.0 * ghat), touch=None if initial is None else initial.touch)
         # the widest search: a node moves at most half of it per iteration
         self.max_margin = max(self.scene.margin, 4.0 * float(r.max()))
         mask = np.ones((self.N, 6), dtype=bool)
@@ -155,13 +193,22 @@ class IncrementalSolver(SystemMixin):
         self.free = np.flatnonzero(~self.mask)
         self.ubar = np.where(sc.mask, sc.values, 0.0).reshape(n, 6)
         self.f_loads = sc.loads.reshape(n, 6)
+        self.f_base = np.zeros((n, 6))         # loads at load factor 0 (those of a continued solve)
         self.plate_force = np.array([p.normal * p.force if p.force_controlled else 0.0 for p in sc.plates])
         self.cor = Corotational(frame, geometric="consistent")
         self.motion = 0.0
-        self.presc = np.zeros((n, 6))          # current values of the prescribed DOFs (mm, rad)
+        self.presc = np.zeros((n, 6))          # prescribed DOFs moved since the start (mm, rad)
         self.load_scale = 0.0
         self.prestrain_scale = 1.0
         self.delta = self.s.delta0
+        if initial is not None:
+            self.cor.ut[...] = initial.ut
+            self.cor.Q[...] = initial.Q
+            self.prestrain_scale = float(initial.prestrain_scale)
+            self.f_base = np.array(initial.loads, dtype=float).reshape(n, 6)
+            self.delta = min(float(initial.delta), self.s.delta_max)
+        if prestrain_scale is not None:
+            self.prestrain_scale = float(prestrain_scale)
         self.small = frame.n_elements < PARALLEL_ELEMENTS
         self.sys = None
         self._coupled = np.zeros((0, 2), dtype=np.int64)
@@ -171,6 +218,11 @@ class IncrementalSolver(SystemMixin):
             self.scene.search(self.positions)
             self._pattern()
             self._start_ledger()
+        if initial is not None:
+            for k in ("external_work", "prestrain_work", "dissipation", "stabilization", "U0", "B0"):
+                self.ledger[k] = float(initial.ledger[k])
+            self.ledger["strain_energy"] = self._ev0["U"] - self.ledger["U0"]
+            self.ledger["contact_energy"] = self._ev0["B"] - self.ledger["B0"]
 
     # ------------------------------------------------------------------ state
     @property
@@ -186,6 +238,22 @@ class IncrementalSolver(SystemMixin):
     def snapshot(self):
         return (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy(), self.motion, self.prestrain_scale,
                 self.delta, self.plate_force.copy(), self.load_scale, self.presc.copy())
+
+    def applied_loads(self) -> np.ndarray:
+        """(n, 6) dead loads at the current load factor (N, N mm)."""
+        return self.f_base + self.load_scale * self.f_loads
+
+    def export_state(self) -> EngineState:
+        """The state to continue from in another solve of the same frame (:class:`EngineState`)."""
+        sc = self.scene
+        return EngineState(n_nodes=self.n, n_elements=self.frame.n_elements, ut=self.cor.ut.copy(),
+                           Q=self.cor.Q.copy(), prestrain_scale=float(self.prestrain_scale),
+                           loads=self.applied_loads().copy(), plate_z=self.plates.z.copy(),
+                           plate_normal=self.plates.normal.copy(),
+                           plate_force=np.where(self.plates.force_controlled, self.plates.normal * self.plate_force,
+                                                np.nan),
+                           touch=(sc.touch_keys.copy(), sc.touch_rsum.copy(), sc.touch_gap.copy()),
+                           ledger=dict(self.ledger), delta=float(self.delta))
 
     def set_loads(self, loads) -> None:
         """Replace the dead loads (dict node -> (Fx, Fy, Fz, Mx, My, Mz), N and N mm, scaled by the
@@ -300,7 +368,7 @@ class IncrementalSolver(SystemMixin):
     def _converged(self, ev, rn) -> bool:
         fc = ev["g_contact"]
         ref = max(float(np.linalg.norm(ev["fint"])), float(np.linalg.norm(fc)),
-                  float(np.linalg.norm(self.load_scale * self.f_loads)), float(np.linalg.norm(self.plate_force)))
+                  float(np.linalg.norm(self.applied_loads())), float(np.linalg.norm(self.plate_force)))
         floor = 1e-12 * float(np.max(self.frame.EA))
         return rn <= self.s.tol * ref + floor
 
@@ -394,7 +462,7 @@ class IncrementalSolver(SystemMixin):
         slope = float(g.ravel()[free] @ d.ravel()[free])
         base = (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy())
         Pi0 = ev["Pi"]
-        ext = float(np.sum(self.load_scale * self.f_loads * d[:self.n])) + float(self.plate_force @ dz)
+        ext = float(np.sum(self.applied_loads() * d[:self.n])) + float(self.plate_force @ dz)
         for _ in range(40):
             self._apply(a, d)
             if presc:

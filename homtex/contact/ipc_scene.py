@@ -95,10 +95,12 @@ class ContactScene:
     friction : (types, table, plate) from :func:`friction_setup`.
     margin : search margin, mm (> ghat): pairs whose surfaces are farther apart than this at
         the search are left out until the next search.
+    touch : (keys, rsum, gap) of the pairs found touching in the reference geometry by an earlier
+        scene of the same frame (a continued solve); default: found here from the frame's nodes.
     """
 
     def __init__(self, frame, plates: PlateState, pair_enf: Enforcement, plate_enf: Enforcement,
-                 friction: tuple, margin: float):
+                 friction: tuple, margin: float, touch: tuple | None = None):
         self.frame = frame
         self.n = frame.n_nodes
         self.plates = plates
@@ -123,10 +125,14 @@ class ContactScene:
         self.plate_index = np.repeat(np.arange(self.P, dtype=np.int64), self.n)
         self.touch_keys = np.zeros(0, dtype=np.int64)
         self.touch_rsum = np.zeros(0)
+        self.touch_gap = np.zeros(0)
         self.stencil = None
         self.x_search = None
         self.searches = 0
-        self._touching(frame.nodes)
+        if touch is None:
+            self._touching(frame.nodes)
+        else:                   # a continued solve keeps the pairs its first solve found touching
+            self.touch_keys, self.touch_rsum, self.touch_gap = (np.array(t, copy=True) for t in touch)
 
     # ------------------------------------------------------------------ candidates
     def _keys(self, pr) -> np.ndarray:

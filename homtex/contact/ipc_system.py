@@ -17,6 +17,7 @@ import contextlib
 import numba
 import numpy as np
 
+from ..analysis.energy import balance
 from ..analysis.tangent import FreeSystem
 from ..fem.corotational_system import element_matvec_serial, spin_between
 from .friction import friction_potential
@@ -104,7 +105,7 @@ class SystemMixin:
             g[:self.n, :3] += fr.grad
         ev["g_contact"] = g[:, :3].copy()
         ev["g_contact"][:self.n] -= fint[:, :3]
-        g[:self.n] -= self.load_scale * self.f_loads
+        g[:self.n] -= self.applied_loads()
         g[self.n:, 2] -= self.plate_force
         ev["g"] = g
         ev["Pi"] = ev["U"] + ev["B"] + ev["D"]
@@ -189,6 +190,7 @@ class SystemMixin:
     # ------------------------------------------------------------------ energy ledger
     def _start_ledger(self) -> None:
         ev = self._evaluate(self.positions, [], hessian=False)
+        self._ev0 = {"U": ev["U"], "B": ev["B"]}
         self.ledger = {"external_work": 0.0, "prestrain_work": 0.0, "dissipation": 0.0, "stabilization": 0.0,
                        "U0": ev["U"], "B0": ev["B"], "strain_energy": 0.0, "contact_energy": 0.0}
         self._react = self._reactions(ev)
@@ -197,11 +199,12 @@ class SystemMixin:
 
     def _reactions(self, ev) -> np.ndarray:
         """(N, 6) forces the surroundings apply on prescribed DOFs and loaded DOFs (N, N mm)."""
+        f = self.applied_loads()
         g = ev["g"].copy()
-        g[:self.n] += self.load_scale * self.f_loads
+        g[:self.n] += f
         g[self.n:, 2] += self.plate_force
         r = np.where(self.mask.reshape(self.N, 6), g, 0.0)
-        r[:self.n] += self.load_scale * self.f_loads
+        r[:self.n] += f
         r[self.n:, 2] += self.plate_force
         return r
 
@@ -228,11 +231,10 @@ class SystemMixin:
         info.extra["reactions"] = react
 
     def balance(self) -> float:
-        """(W_ext + W_prestrain - dU - dB - D - S) / max(|W_ext + W_prestrain|, tiny)."""
+        """The relative energy balance of the path so far (:func:`homtex.analysis.energy.balance`)."""
         L = self.ledger
-        w = L["external_work"] + L["prestrain_work"]
-        rest = w - L["strain_energy"] - L["contact_energy"] - L["dissipation"] - L["stabilization"]
-        return float(rest / max(abs(w), 1e-300))
+        return balance(L["external_work"], L["prestrain_work"], L["strain_energy"], L["contact_energy"],
+                       L["dissipation"], L["stabilization"])
 
 
 

@@ -29,22 +29,20 @@ import time
 import numpy as np
 import xarray as xr
 
+from ..analysis.energy import CHECK_LIMIT, LEDGER_META, ledger_check
 from ..analysis.stepping import flag_force_drops
 from ..errors import SolverError
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
 from ..model.scene import Plate
 from ..output.datasets import curve_dataset
 from ..output.progress import Progress
+from .engine import EngineStepper
 from .incremental import IncrementalSolver, NonlinearSettings
 from .options import Contact
 
 __all__ = ["CHECK_LIMIT", "first_buckling_strain", "run_nonlinear_compression"]
 
 log = logging.getLogger(__name__)
-
-#: largest share of the external work the stabilisation may absorb, and largest relative
-#: energy imbalance, on a reported curve (beyond: status "flagged")
-CHECK_LIMIT = 0.01
 
 META = {
     "stress": ("kPa", "nominal compressive stress (top plate force / area)"),
@@ -72,7 +70,8 @@ META = {
     "friction_energy": ("N mm", "energy dissipated by friction since the start"),
     "stabilization_energy": ("N mm", "energy absorbed by the pseudo-transient continuation since the start "
                                      "(sum du M du / delta)"),
-    "energy_balance": ("1", "(external work - strain - contact - friction - stabilisation energy) / external work"),
+    "prestrain_work": LEDGER_META["prestrain_work"],
+    "energy_balance": LEDGER_META["energy_balance"],
     **{k: ("N mm", v) for k, v in ENERGY_LONG_NAMES.items()},
 }
 _STRAIN = ("1", "compression strain (plate displacement / initial plate distance)")
@@ -108,7 +107,8 @@ def first_buckling_strain(strain, pile_force, drop: float = 0.5) -> float:
 class _Curve:
     """The solver, the top plate's control and the recorded levels of one curve."""
 
-    def __init__(self, test, contact: Contact, control: str, friction_spec, settings, refine: float):
+    def __init__(self, test, contact: Contact, control: str, friction_spec, settings, refine: float,
+                 max_cuts: int):
         self.test, self.control, self.refine = test, control, refine
         frame = test.frame
         self.ghat = contact.barrier_gap * float(frame.contact_radius.min())
@@ -123,59 +123,26 @@ class _Curve:
         self.masks = [np.asarray(m, dtype=bool) for m in groups.values()]
         self.names = list(groups)
         self.rows = {k: [] for k in ("strain", *META, "group_energy")}
-        self.level = 0.0
-        self.acc = {"it": 0, "fact": 0, "sub": 0}
-        self.history = []            # (top plate height, pile force) of every accepted step
+        self.stepper = EngineStepper(self.sol, self._solve, max_cuts=max_cuts, refine=refine,
+                                     on_accept=self._accepted)
 
     def _solve(self, level: float):
         if self.control == "displacement":
             return self.sol.solve(plate_z={1: self.z0 - level * self.test.H0})
         return self.sol.solve(plate_force={1: level * self.test.area * 1e-3})
 
-    def advance(self, level: float, depth: int, max_cuts: int):
-        """Reach ``level`` from the current one; halve a step that fails or that the
-        stabilisation dominates (up to ``max_cuts`` levels deep). A jump that halving does not
-        resolve (the halves fail) is taken as the single step that passed."""
-        L = self.sol.ledger
-        before = dict(L)
-        cp = self.sol.checkpoint()
-        n0 = len(self.history)
-        try:
-            info = self._solve(level)
-        except SolverError:
-            if depth >= max_cuts:
-                raise
-            return self._halves(level, depth, max_cuts)
-        d = {k: L[k] - before[k] for k in L}
-        dw = d["external_work"] + d["prestrain_work"]
-        rest = dw - d["strain_energy"] - d["contact_energy"] - d["dissipation"] - d["stabilization"]
-        self._accepted(info)
-        if depth < max_cuts and max(d["stabilization"], abs(rest)) > self.refine * max(abs(dw), 1e-300):
-            # the step jumped (buckling, snap-through) or is too coarse for the work it does
-            # (its trapezoidal work misses its energy change): take it again in halves
-            done, coarse = self.sol.checkpoint(), self.history[n0:]
-            self.sol.rollback(cp)          # self.level is still the step's start
-            del self.history[n0:]
-            try:
-                return self._halves(level, depth, max_cuts)
-            except SolverError:
-                self.sol.rollback(done)
-                self.history[n0:] = coarse
-                self.level = level
-        self.level = level
-        return info
-
     def _accepted(self, info):
         N = self.sol.cor.forces[:, 6]
-        self.history.append((self.sol.plates.z[1], float(max(0.0, -N[self.pile].min())) if self.pile.any() else 0.0))
-        self.acc["it"] += info.iterations
-        self.acc["fact"] += info.iterations + info.projected + 1
-        self.acc["sub"] += 1
+        return self.sol.plates.z[1], float(max(0.0, -N[self.pile].min())) if self.pile.any() else 0.0
 
-    def _halves(self, level, depth, max_cuts):
-        mid = 0.5 * (self.level + level)
-        self.advance(mid, depth + 1, max_cuts)
-        return self.advance(level, depth + 1, max_cuts)
+    @property
+    def history(self):
+        """(top plate height, pile force) of every accepted step."""
+        return self.stepper.accepted
+
+    def advance(self, level: float, depth: int, max_cuts: int):
+        """Reach ``level`` (see :class:`~homtex.contact.engine.EngineStepper`)."""
+        return self.stepper.advance(level, depth)
 
     def record(self, info, target: float):
         sol, test, r = self.sol, self.test, self.rows
@@ -197,10 +164,10 @@ class _Curve:
         gaps = np.r_[ev["pairs"].gap, ev["plates"]["gap"]]
         r["min_gap"].append(float(gaps.min()) if gaps.size else np.inf)
         r["max_penetration"].append(max(0.0, -r["min_gap"][-1]))
-        for key, name in (("it", "contact_iterations"), ("it", "newton_iterations"), ("fact", "linear_solves"),
-                          ("sub", "substeps")):
-            r[name].append(self.acc[key])
-        self.acc = {"it": 0, "fact": 0, "sub": 0}
+        acc = self.stepper.take_totals()
+        for key, name in (("iterations", "contact_iterations"), ("iterations", "newton_iterations"),
+                          ("factorisations", "linear_solves"), ("substeps", "substeps")):
+            r[name].append(acc[key])
         r["friction_rounds"].append(info.friction_rounds)
         r["stabilization_force"].append(0.0)
         r["negative_eigenvalues"].append(info.negative_eigenvalues)
@@ -210,6 +177,7 @@ class _Curve:
         r["contact_energy"].append(L["contact_energy"])
         r["strain_energy"].append(L["strain_energy"])
         r["external_work"].append(L["external_work"])
+        r["prestrain_work"].append(L["prestrain_work"])
         r["friction_energy"].append(L["dissipation"])
         r["stabilization_energy"].append(L["stabilization"])
         r["energy_balance"].append(sol.balance())
@@ -230,22 +198,8 @@ def _buckling(cv, test) -> float:
 
 def _checks(ds) -> str:
     """'' if the curve passes the energy checks, else what fails (and where)."""
-    W = ds["external_work"].values
-    S = ds["stabilization_energy"].values
-    bal = ds["energy_balance"].values
-    e = ds["strain"].values
-    msgs = []
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.where(W > 0, S / W, 0.0)
-    if frac.size and np.nanmax(frac) > CHECK_LIMIT:
-        k = int(np.nanargmax(frac))
-        msgs.append(f"the stabilisation absorbed {100 * frac[k]:.2g} % of the external work at strain {e[k]:.4g} "
-                    f"(limit {100 * CHECK_LIMIT:g} %): the path jumps there (a snap-through or a step too large)")
-    if bal.size and np.nanmax(np.abs(bal)) > CHECK_LIMIT:
-        k = int(np.nanargmax(np.abs(bal)))
-        msgs.append(f"the energy balance is off by {100 * bal[k]:.2g} % at strain {e[k]:.4g} (limit "
-                    f"{100 * CHECK_LIMIT:g} %)")
-    return "; ".join(msgs)
+    return ledger_check(ds["external_work"].values, ds["prestrain_work"].values, ds["stabilization_energy"].values,
+                        ds["energy_balance"].values, ds["strain"].values, level_name="strain")
 
 
 def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, friction_spec: dict | None = None,
@@ -261,7 +215,7 @@ def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, 
     Returns the Dataset described in the module docstring.
     """
     t0 = time.perf_counter()
-    cv = _Curve(test, contact, control, friction_spec, settings, refine)
+    cv = _Curve(test, contact, control, friction_spec, settings, refine, max_cuts)
     bar = Progress(len(targets), "compression steps", enabled=progress)
     status, detail = Status.OK, ""
     for k, target in enumerate(targets):

@@ -1,0 +1,78 @@
+"""The one energy balance of every path (``solve_nonlinear`` with or without contact, ``compress``,
+the seam functions, ``tensile``) and the check that flags a path whose ledger does not close.
+
+The ledger of a path (cumulative from its start, N mm):
+
+* ``external_work``: work of the loads and of the reactions on prescribed motions (plates too),
+* ``prestrain_work``: work of the pre-strain ramp (the stitch thread pulled shorter),
+* ``strain_energy`` and ``contact_energy``: changes of the stored beam and barrier energies,
+* ``friction_energy``: energy dissipated by friction,
+* ``stabilization_energy``: energy taken out by the solver where the state jumped (the
+  pseudo-transient continuation of the contact engine, or a snap-through to the stable branch).
+
+The balance is (external work + pre-strain work - stored changes - friction - stabilisation)
+over the largest magnitude among those six terms, so that it reads as a relative error whether
+the path is driven (work in) or relaxes (energy released, no driver).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["CHECK_LIMIT", "LEDGER_META", "balance", "ledger_check"]
+
+#: largest relative energy imbalance, and largest share of the driven work the stabilisation may
+#: take, on a path reported "ok" (beyond: "flagged")
+CHECK_LIMIT = 0.01
+
+LEDGER_META = {
+    "external_work": ("N mm", "work of the loads and of the reactions on prescribed motions and plates"),
+    "prestrain_work": ("N mm", "work of the pre-strain ramp (integral of dU/d(pre-strain scale))"),
+    "strain_energy": ("N mm", "beam strain energy minus its value at the start of the path"),
+    "contact_energy": ("N mm", "barrier energy of the contacts minus its value at the start"),
+    "friction_energy": ("N mm", "energy dissipated by friction since the start"),
+    "stabilization_energy": ("N mm", "energy taken out where the state jumped (pseudo-transient continuation, "
+                                     "snap-through), since the start"),
+    "energy_balance": ("1", "(external + pre-strain work - strain - contact - friction - stabilisation energy) / "
+                            "the largest of these magnitudes"),
+}
+
+
+def balance(external_work, prestrain_work, strain_energy, contact_energy=0.0, friction_energy=0.0,
+            stabilization_energy=0.0):
+    """Relative imbalance of the ledger (scalars or arrays of the same shape; 0 where all vanish)."""
+    terms = np.broadcast_arrays(*(np.asarray(t, dtype=float) for t in (
+        external_work, prestrain_work, strain_energy, contact_energy, friction_energy, stabilization_energy)))
+    w, wp, du, db, d, s = terms
+    rest = w + wp - du - db - d - s
+    scale = np.max(np.abs(np.stack(terms)), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(scale > 0, rest / np.where(scale > 0, scale, 1.0), 0.0)
+    return float(out) if out.ndim == 0 else out
+
+
+def ledger_check(external_work, prestrain_work, stabilization_energy, energy_balance, levels,
+                 level_name: str = "load factor", driven: bool = True, limit: float = CHECK_LIMIT) -> str:
+    """'' if the path passes, else what fails and where: the balance beyond ``limit`` at any state,
+    or (``driven``: loads, motions or a pre-strain ramp did work) a stabilisation beyond ``limit``
+    of the driven work (a relaxation with no driver reports what it released, unflagged)."""
+    W = np.abs(np.asarray(external_work, dtype=float) + np.asarray(prestrain_work, dtype=float))
+    S = np.asarray(stabilization_energy, dtype=float)
+    bal = np.asarray(energy_balance, dtype=float)
+    lv = np.asarray(levels, dtype=float)
+    msgs = []
+    if driven and S.size:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(W > 0, S / np.where(W > 0, W, 1.0), np.where(S > 0, np.inf, 0.0))
+        k = int(np.nanargmax(frac))
+        if frac[k] > limit:
+            msgs.append(f"the stabilisation absorbed {100 * frac[k]:.3g} % of the driven work by {level_name} "
+                        f"{lv[k]:.4g} (limit {100 * limit:g} %): the state jumps there (a snap-through or buckling "
+                        "released energy, or a step too large)")
+    if bal.size and np.nanmax(np.abs(bal)) > limit:
+        k = int(np.nanargmax(np.abs(bal)))
+        msgs.append(f"the energy balance is off by {100 * bal[k]:.3g} % at {level_name} {lv[k]:.4g} "
+                    f"(limit {100 * limit:g} %)")
+    if bal.size and not np.all(np.isfinite(bal)):
+        msgs.append("the energy ledger is not finite")
+    return "; ".join(msgs)

@@ -1,0 +1,318 @@
+"""The large-motion engine on any frame: ``homtex.solve_nonlinear(..., contact=Contact())``.
+
+:class:`EngineStepper` takes an :class:`~homtex.contact.incremental.IncrementalSolver` through
+increasing levels of one load parameter: a step that fails is redone as two halves, and so is a
+step whose energy ledger does not close (its trapezoidal work misses the energy it stored and
+dissipated by more than ``refine`` of its work: too coarse for the path) or whose stabilisation
+took more than ``refine`` of the work done on it (a jump inside the step); recursively up to
+``max_cuts`` levels deep. A jump that halving does not resolve (the halves fail) is kept as the
+single step that passed, and the path is flagged by the ledger check. ``compress``, the seam
+functions and :func:`run_engine` all step with it.
+
+:func:`run_engine` is what ``solve_nonlinear`` runs with contact: the load factor lambda goes from
+0 to 1 in ``steps`` equal levels and scales, from the start state, the dead loads, the prescribed
+motions of ``fixed``, the plates' motions and forces and the pre-strain scale; the path Dataset
+records every level with the energy ledger of :mod:`homtex.analysis.energy`, the plates' heights
+and forces, contacts, stability and the monitored nodes.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+import xarray as xr
+
+from ..analysis.energy import LEDGER_META, ledger_check
+from ..analysis.nonlinear import NonlinearResult
+from ..analysis.records import DOFS, ENERGY_NAMES
+from ..errors import InputError, SolverError
+from ..model.results import Status, set_status
+from ..model.scene import Plate, parse_fixed, parse_loads
+from ..output.datasets import curve_dataset
+from ..output.progress import Progress
+from .incremental import EngineState, IncrementalSolver, NonlinearSettings, StepInfo
+from .options import Contact
+
+__all__ = ["EngineStepper", "run_engine"]
+
+log = logging.getLogger(__name__)
+
+_LEDGER = ("external_work", "prestrain_work", "strain_energy", "contact_energy", "dissipation", "stabilization")
+
+
+class EngineStepper:
+    """Adaptive stepping of an :class:`IncrementalSolver` through increasing levels.
+
+    Parameters
+    ----------
+    sol : the solver (its state is the start of the path).
+    solve : ``solve(level) -> StepInfo``: one solver step to ``level`` (SolverError leaves the
+        state unchanged).
+    max_cuts : halvings of a step, at most (depth of the recursion).
+    refine : a step whose imbalance or stabilisation exceeds this share of its work is halved.
+    on_accept : called with the StepInfo of every accepted sub-step; whatever it returns is kept in
+        ``accepted`` (rolled back with the sub-steps a refinement replaces).
+    """
+
+    def __init__(self, sol: IncrementalSolver, solve: Callable[[float], StepInfo], *, max_cuts: int = 4,
+                 refine: float = 0.01, on_accept: Callable[[StepInfo], object] | None = None, start: float = 0.0):
+        self.sol, self._solve = sol, solve
+        self.max_cuts, self.refine = int(max_cuts), float(refine)
+        self.on_accept = on_accept
+        self.level = float(start)
+        self.accepted: list = []
+        self.totals = {"iterations": 0, "factorisations": 0, "substeps": 0}
+
+    def advance(self, level: float, depth: int = 0) -> StepInfo:
+        """Reach ``level`` from the current one (SolverError when a step fails at every depth)."""
+        L = self.sol.ledger
+        before = {k: L[k] for k in _LEDGER}
+        cp = self.sol.checkpoint()
+        n0 = len(self.accepted)
+        totals0 = dict(self.totals)
+        try:
+            info = self._solve(level)
+        except SolverError:
+            if depth >= self.max_cuts:
+                raise
+            return self._halves(level, depth)
+        self._accepted(info)
+        if depth < self.max_cuts and self._too_coarse({k: L[k] - before[k] for k in _LEDGER}):
+            done, coarse, totals1 = self.sol.checkpoint(), self.accepted[n0:], dict(self.totals)
+            self.sol.rollback(cp)
+            del self.accepted[n0:]
+            self.totals = totals0
+            try:
+                return self._halves(level, depth)
+            except SolverError:             # halving does not resolve the jump: keep the step that passed
+                self.sol.rollback(done)
+                self.accepted[n0:] = coarse
+                self.totals = totals1
+        self.level = level
+        return info
+
+    def _too_coarse(self, d: dict) -> bool:
+        dw = d["external_work"] + d["prestrain_work"]
+        stored = (d["strain_energy"], d["contact_energy"], d["dissipation"])
+        rest = dw - sum(stored) - d["stabilization"]
+        scale = max(abs(dw), *(abs(v) for v in stored))
+        if scale <= 0.0:
+            return False
+        if dw != 0.0 and d["stabilization"] > self.refine * abs(dw):
+            return True
+        return abs(rest) > self.refine * scale
+
+    def _accepted(self, info: StepInfo) -> None:
+        self.totals["iterations"] += info.iterations
+        self.totals["factorisations"] += info.iterations + info.projected + 1
+        self.totals["substeps"] += 1
+        if self.on_accept is not None:
+            self.accepted.append(self.on_accept(info))
+
+    def _halves(self, level: float, depth: int) -> StepInfo:
+        mid = 0.5 * (self.level + level)
+        self.advance(mid, depth + 1)
+        return self.advance(level, depth + 1)
+
+    def take_totals(self) -> dict:
+        out, self.totals = self.totals, {"iterations": 0, "factorisations": 0, "substeps": 0}
+        return out
+
+
+# ---------------------------------------------------------------------------------------------
+_PATH_META = {
+    "load_factor": ("1", "load factor lambda (loads, prescribed motions, plate motions and forces, pre-strain ramp)"),
+    "stable": ("1", "state stable: the Hessian of the total potential on the free DOFs is positive definite"),
+    "negative_eigenvalues": ("1", "negative eigenvalues of the Hessian of the total potential (LDL^T inertia)"),
+    "iterations": ("1", "Newton iterations of the level (all its sub-steps and friction rounds)"),
+    "substeps": ("1", "steps the level needed (1: none; more after halving)"),
+    "residual": ("N", "out-of-balance force on the free DOFs at convergence (2-norm)"),
+    "prestrain_scale": ("1", "factor on the frame's pre-strain"),
+    **{k: ("N mm", f"{k.replace('_', ' ')} strain energy, sum over elements") for k in ENERGY_NAMES},
+    **LEDGER_META,
+    "active_yarn_yarn": ("1", "yarn-yarn segment pairs within the barrier's activation gap"),
+    "active_yarn_plate": ("1", "nodes within the barrier's activation gap of a plate"),
+    "min_gap": ("mm", "smallest yarn-yarn or yarn-plate gap (surface to surface)"),
+    "max_axial_strain": ("1", "largest |axial strain| N / EA of any element"),
+    "strain_exceeded": ("1", "an element's axial or shear strain is beyond its strain_limit"),
+}
+
+
+class _Run:
+    """The levels of one :func:`run_engine` call: solver, level map and recorded rows."""
+
+    def __init__(self, sol: IncrementalSolver, plates0, plate_motion, force0, force1, s0, s1, monitor, n_ramp):
+        self.sol = sol
+        self.z0, self.motion_z = plates0, plate_motion
+        self.f0, self.f1 = force0, force1
+        self.s0, self.s1 = s0, s1
+        self.monitor = monitor
+        self.n_ramp = n_ramp
+        self.rows: list[dict] = []
+
+    def solve(self, lam: float) -> StepInfo:
+        sol = self.sol
+        kw = {"motion": lam, "loads": lam}
+        fc = sol.plates.force_controlled
+        if len(fc):
+            kw["plate_z"] = np.where(fc, np.nan, self.z0 + lam * self.motion_z)
+            if fc.any():
+                kw["plate_force"] = {int(p): float(self.f0[p] + lam * (self.f1[p] - self.f0[p]))
+                                     for p in np.flatnonzero(fc)}
+        if self.s1 is not None:
+            kw["prestrain_scale"] = self.s0 + lam * (self.s1 - self.s0)
+        return sol.solve(**kw)
+
+    def record(self, lam: float, info: StepInfo, totals: dict) -> None:
+        sol = self.sol
+        ev = info.extra["ev"]
+        L = sol.ledger
+        E = sol.cor.energy.sum(axis=0)
+        axial, shear, _ = sol.cor.strains()
+        limit = np.asarray(sol.frame.strain_limit, dtype=float)
+        gaps = np.r_[ev["pairs"].gap, ev["plates"]["gap"]]
+        neg = int(info.negative_eigenvalues)
+        r = {"load_factor": lam, "stable": neg == 0, "negative_eigenvalues": neg,
+             "iterations": totals["iterations"], "substeps": totals["substeps"], "residual": info.residual,
+             "prestrain_scale": sol.prestrain_scale, **dict(zip(ENERGY_NAMES, (float(v) for v in E))),
+             "external_work": L["external_work"], "prestrain_work": L["prestrain_work"],
+             "strain_energy": L["strain_energy"], "contact_energy": L["contact_energy"],
+             "friction_energy": L["dissipation"], "stabilization_energy": L["stabilization"],
+             "energy_balance": sol.balance(), "active_yarn_yarn": ev["pairs"].n_active,
+             "active_yarn_plate": len(ev["plates"]["active"]),
+             "min_gap": float(gaps.min()) if gaps.size else np.inf,
+             "max_axial_strain": float(np.abs(axial).max(initial=0.0)),
+             "strain_exceeded": bool(np.any((np.abs(axial) > limit) | (shear > limit)))}
+        react = info.extra["reactions"]
+        r["plate_z"] = sol.plates.z.copy()
+        r["plate_force"] = sol.plates.normal * ev["plates"]["grad_plate"] if sol.P else np.zeros(0)
+        r["u"] = sol.cor.u()[self.monitor]
+        r["force"] = react[:sol.n][self.monitor]
+        self.rows.append(r)
+
+    def dataset(self, attrs: dict) -> xr.Dataset:
+        n = len(self.rows)
+        data = {k: ("step", np.array([r[k] for r in self.rows], dtype=float if k not in ("stable", "strain_exceeded")
+                                     else bool).reshape(n), *meta) for k, meta in _PATH_META.items()}
+        coords = {"step": (np.arange(1, n + 1), "1", "converged level along the path")}
+        P = self.sol.P
+        if P:
+            data["plate_z"] = (("step", "plate"), np.array([r["plate_z"] for r in self.rows]).reshape(n, P), "mm",
+                               "plate height")
+            data["plate_force"] = (("step", "plate"), np.array([r["plate_force"] for r in self.rows]).reshape(n, P),
+                                   "N", "force of the yarns on the plate, pressing it along its normal (compression "
+                                        "positive)")
+            coords["plate"] = (np.arange(P), "1", "plate")
+        m = len(self.monitor)
+        if m:
+            coords["node"] = (np.asarray(self.monitor), "1", "monitored node")
+            coords["dof"] = (np.array(DOFS), "1", "degree of freedom")
+            data["u"] = (("step", "node", "dof"), np.array([r["u"] for r in self.rows]).reshape(n, m, 6),
+                         "mm (ux, uy, uz), rad (rx, ry, rz)", "displacement of monitored nodes from the frame's "
+                                                             "reference geometry; rotations as rotation vectors")
+            data["force"] = (("step", "node", "dof"), np.array([r["force"] for r in self.rows]).reshape(n, m, 6),
+                             "N (ux, uy, uz), N mm (rx, ry, rz)", "external force on monitored nodes: loads plus "
+                                                                  "support reactions")
+        return curve_dataset(data, coords, attrs)
+
+
+def _plates_for_run(plates, initial: EngineState | None):
+    """(Plate list at the start, (P,) plate motion, (P,) force at lambda 0, (P,) force at 1)."""
+    if plates is None:
+        if initial is None or not len(initial.plate_z):
+            return [], np.zeros(0), np.zeros(0), np.zeros(0)
+        out, f = [], []
+        for z, nrm, F in zip(initial.plate_z, initial.plate_normal, initial.plate_force):
+            fc = bool(np.isfinite(F))
+            out.append(Plate(z=float(z), normal=int(nrm), force=float(F) if fc else None,
+                             displacement=None if fc else 0.0))
+            f.append(float(F) if fc else 0.0)
+        f = np.array(f)
+        return out, np.zeros(len(out)), f, f.copy()
+    plates = list(plates)
+    for i, p in enumerate(plates):
+        if not isinstance(p, Plate):
+            raise InputError(f"plates[{i}] must be a homtex.Plate, got {type(p).__name__}")
+    motion = np.array([0.0 if p.force_controlled else float(p.displacement or 0.0) for p in plates])
+    f1 = np.array([float(p.force) if p.force_controlled else 0.0 for p in plates])
+    f0 = np.zeros(len(plates))
+    start = [replace(p, force=0.0) if p.force_controlled else replace(p, displacement=0.0) for p in plates]
+    return start, motion, f0, f1
+
+
+def run_engine(frame, fixed=None, loads=None, *, contact: Contact, plates=None, steps: int = 10,
+               prestrain: float | None = None, initial: EngineState | None = None, friction_spec: dict | None = None,
+               max_cuts: int = 10, refine: float = 0.003, settings: NonlinearSettings | None = None, monitor=None,
+               progress: bool = False) -> NonlinearResult:
+    """Follow lambda from 0 to 1 in ``steps`` levels with the large-motion engine (see the module
+    docstring and :func:`homtex.solve_nonlinear`); SolverError names the level that failed (its
+    ``result`` attribute holds the path up to it)."""
+    t0 = time.perf_counter()
+    n = frame.n_nodes
+    start_plates, motion_z, f0, f1 = _plates_for_run(plates, initial)
+    s0 = float(initial.prestrain_scale) if initial is not None else (0.0 if prestrain is not None else 1.0)
+    sol = IncrementalSolver(frame, fixed, loads, start_plates, contact, friction_spec=friction_spec, settings=settings,
+                            initial=initial, prestrain_scale=s0)
+    mask, ubar = parse_fixed(fixed, n)
+    f = parse_loads(loads, n)
+    driven = bool(np.any(ubar != 0.0) or np.any(f != 0.0) or np.any(motion_z != 0.0) or np.any(f1 != f0) or
+                  (prestrain is not None and float(prestrain) != s0))
+    if monitor is None:
+        monitor = np.flatnonzero(np.any((f != 0.0).reshape(n, 6) | (ubar != 0.0).reshape(n, 6), axis=1))
+    run = _Run(sol, np.array([p.z for p in start_plates], dtype=float), motion_z, f0, f1, s0,
+               None if prestrain is None else float(prestrain), np.asarray(monitor, dtype=np.int64), steps)
+    stepper = EngineStepper(sol, run.solve, max_cuts=max_cuts, refine=refine)
+    bar = Progress(steps, "engine steps", enabled=progress)
+    status, detail, failure = Status.OK, "", None
+    for k in range(1, steps + 1):
+        lam = k / steps
+        try:
+            info = stepper.advance(lam)
+        except SolverError as err:
+            status = Status.FAILED
+            detail = (f"failed at step {k} of {steps} (load factor {lam:.4g}, also after halving the step {max_cuts} "
+                      f"times): {err}")
+            failure = err
+            break
+        run.record(lam, info, stepper.take_totals())
+        bar.step()
+    bar.close()
+    attrs = {"engine": "large-motion contact (co-rotational beams, IPC barrier, lagged friction, PTC)",
+             "control": "load", "steps": int(steps), "max_cuts": int(max_cuts), "refine": float(refine),
+             "barrier_gap_mm": sol.ghat, "barrier_stiffness_N_per_mm": sol.kappa, "friction_slip_mm": sol.eps_v,
+             "friction_max": float(max(sol.scene.mu_table.max(initial=0.0), sol.scene.mu_plate.max(initial=0.0))),
+             "initial_touching_pairs": sol.scene.initial_touching, "continued": initial is not None,
+             "driven": driven, "seconds": time.perf_counter() - t0}
+    ds = run.dataset(attrs)
+    if status is Status.OK and len(run.rows):
+        check = ledger_check(ds.external_work.values, ds.prestrain_work.values, ds.stabilization_energy.values,
+                             ds.energy_balance.values, ds.load_factor.values, driven=driven)
+        if check:
+            status, detail = Status.FLAGGED, check
+            log.warning("solve_nonlinear: %s", check)
+    set_status(ds, status, detail)
+    result = _result(sol, ds, run)
+    if failure is not None:
+        err = SolverError(f"solve_nonlinear (contact): {detail}")
+        err.result = result
+        raise err from failure
+    return result
+
+
+def _result(sol: IncrementalSolver, path: xr.Dataset, run: _Run) -> NonlinearResult:
+    n = sol.n
+    react = sol._react[:n]
+    reactions = np.where(sol.mask[:6 * n].reshape(n, 6), react - sol.applied_loads(), 0.0)
+    neg = int(run.rows[-1]["negative_eigenvalues"]) if run.rows else -1
+    lam = float(run.rows[-1]["load_factor"]) if run.rows else 0.0
+    u = sol.cor.u()
+    history = [(float(r["load_factor"]), int(r["iterations"]), float(r["residual"])) for r in run.rows]
+    return NonlinearResult(frame=sol.frame, u=u, x=sol.positions.copy(), Q=sol.cor.Q.copy(),
+                           forces=sol.cor.forces.copy(), energy=dict(zip(ENERGY_NAMES, sol.cor.energy.T.copy())),
+                           reactions=reactions, path=path, load_factor=lam, stable=neg == 0,
+                           negative_eigenvalues=neg, critical_load_factor=float("nan"), history=history,
+                           state=sol.export_state(), plate_z=sol.plates.z.copy())
