@@ -142,3 +142,37 @@ def test_a_step_that_cannot_be_taken_raises_with_the_path_up_to_it():
     part = err.value.result
     assert part.path.attrs["status"] == "failed" and "step" in part.path.attrs["status_detail"]
     assert part.path.sizes["step"] <= 1 and np.all(np.isfinite(part.x))
+
+
+def scaled_crossing(r):
+    """Two crossing yarns of radius r (20 elements of 2 r each), B 0.5 r above A."""
+    n, L = 20, 40 * r
+    s = np.linspace(-L / 2, L / 2, n + 1)
+    A = np.c_[s, np.zeros(n + 1), np.zeros(n + 1)]
+    B = np.c_[np.zeros(n + 1), s, np.full(n + 1, 2.5 * r)]
+    el = np.vstack([np.c_[np.arange(n), np.arange(1, n + 1)], n + 1 + np.c_[np.arange(n), np.arange(1, n + 1)]])
+    fr = homtex.Frame(np.vstack([A, B]), el, radius=r, E=2000.0, nu=0.3, yarn=np.r_[np.zeros(n, int), np.ones(n, int)])
+    return fr, (0, n, n + 1, 2 * n + 1)
+
+
+@pytest.mark.parametrize("case", ["thin barrier", "stiff barrier", "thin yarns sliding", "thin yarns, friction"])
+@pytest.mark.parametrize("steps", [1, 3])
+def test_options_that_are_accepted_work_at_their_extremes(case, steps):
+    """What the validation found failing: a barrier gap of 1e-4 r, a barrier 1e6 x stiffer than
+    the default, thin yarns (r = 0.01 mm) pressed 1.2 r and slid 15 r in one or three steps (with
+    and without friction): every case completes with a closed ledger and no overlap."""
+    r = 0.01 if case.startswith("thin yarns") else 0.1
+    fr, ends = scaled_crossing(r)
+    contact = {"thin barrier": homtex.Contact(barrier_gap=1e-4),
+               "stiff barrier": homtex.Contact(barrier_stiffness=1e6 * float(np.mean(fr.EA / fr.length))),
+               "thin yarns sliding": homtex.Contact(), "thin yarns, friction": homtex.Contact(friction=0.3)}[case]
+    slide = 15 * r if case.startswith("thin yarns") else 0.0
+    fixed = {e: "all" for e in ends[:2]}
+    fixed |= {e: {0: slide, 1: 0.0, 2: -1.2 * r, 3: 0.0, 4: 0.0, 5: 0.0} for e in ends[2:]}
+    res = homtex.solve_nonlinear(fr, fixed, None, contact=contact, steps=steps)
+    p = res.path
+    assert p.attrs["status"] == "ok"
+    assert np.abs(p.energy_balance.values).max() < 0.01
+    assert float(p.min_gap.min()) > 0.0 and int(p.active_yarn_yarn[-1]) > 0
+    if "friction" in case:
+        assert float(p.friction_energy[-1]) > 0.3 * float(p.external_work[-1])     # most of the slide's work

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CHECK_LIMIT", "LEDGER_META", "balance", "ledger_check"]
+__all__ = ["CHECK_LIMIT", "LEDGER_META", "balance", "energy_floor", "ledger_check"]
 
 #: largest relative energy imbalance, and largest share of the driven work the stabilisation may
 #: take, on a path reported "ok" (beyond: "flagged")
@@ -38,24 +38,33 @@ LEDGER_META = {
 }
 
 
+def energy_floor(frame) -> float:
+    """Energies below this (N mm) are round-off for ``frame``: the strain energy of an axial strain
+    of about 1.4e-6 in all its elements, 1e-12 x max(EA) x total length."""
+    return 1e-12 * float(np.max(frame.EA, initial=0.0)) * float(np.sum(frame.length))
+
+
 def balance(external_work, prestrain_work, strain_energy, contact_energy=0.0, friction_energy=0.0,
-            stabilization_energy=0.0):
-    """Relative imbalance of the ledger (scalars or arrays of the same shape; 0 where all vanish)."""
+            stabilization_energy=0.0, floor: float = 0.0):
+    """Relative imbalance of the ledger (scalars or arrays of the same shape); 0 where every term
+    is at most ``floor`` (N mm: round-off, see :func:`energy_floor`)."""
     terms = np.broadcast_arrays(*(np.asarray(t, dtype=float) for t in (
         external_work, prestrain_work, strain_energy, contact_energy, friction_energy, stabilization_energy)))
     w, wp, du, db, d, s = terms
     rest = w + wp - du - db - d - s
     scale = np.max(np.abs(np.stack(terms)), axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.where(scale > 0, rest / np.where(scale > 0, scale, 1.0), 0.0)
+        out = np.where(scale > floor, rest / np.where(scale > 0, scale, 1.0), 0.0)
     return float(out) if out.ndim == 0 else out
 
 
 def ledger_check(external_work, prestrain_work, stabilization_energy, energy_balance, levels,
-                 level_name: str = "load factor", driven: bool = True, limit: float = CHECK_LIMIT) -> str:
+                 level_name: str = "load factor", driven: bool = True, limit: float = CHECK_LIMIT,
+                 floor: float = 0.0) -> str:
     """'' if the path passes, else what fails and where: the balance beyond ``limit`` at any state,
     or (``driven``: loads, motions or a pre-strain ramp did work) a stabilisation beyond ``limit``
-    of the driven work (a relaxation with no driver reports what it released, unflagged)."""
+    of the driven work (a relaxation with no driver reports what it released, unflagged);
+    stabilisation at most ``floor`` (N mm, round-off) is not counted."""
     W = np.abs(np.asarray(external_work, dtype=float) + np.asarray(prestrain_work, dtype=float))
     S = np.asarray(stabilization_energy, dtype=float)
     bal = np.asarray(energy_balance, dtype=float)
@@ -63,7 +72,7 @@ def ledger_check(external_work, prestrain_work, stabilization_energy, energy_bal
     msgs = []
     if driven and S.size:
         with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(W > 0, S / np.where(W > 0, W, 1.0), np.where(S > 0, np.inf, 0.0))
+            frac = np.where(S <= floor, 0.0, np.where(W > 0, S / np.where(W > 0, W, 1.0), np.inf))
         k = int(np.nanargmax(frac))
         if frac[k] > limit:
             msgs.append(f"the stabilisation absorbed {100 * frac[k]:.3g} % of the driven work by {level_name} "

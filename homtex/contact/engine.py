@@ -100,7 +100,7 @@ class EngineStepper:
         stored = (d["strain_energy"], d["contact_energy"], d["dissipation"])
         rest = dw - sum(stored) - d["stabilization"]
         scale = max(abs(dw), *(abs(v) for v in stored))
-        if scale <= 0.0:
+        if scale <= self.sol.energy_floor:
             return False
         if dw != 0.0 and d["stabilization"] > self.refine * abs(dw):
             return True
@@ -290,7 +290,8 @@ def run_engine(frame, fixed=None, loads=None, *, contact: Contact, plates=None, 
     ds = run.dataset(attrs)
     if status is Status.OK and len(run.rows):
         check = ledger_check(ds.external_work.values, ds.prestrain_work.values, ds.stabilization_energy.values,
-                             ds.energy_balance.values, ds.load_factor.values, driven=driven)
+                             ds.energy_balance.values, ds.load_factor.values, driven=driven,
+                             floor=sol.energy_floor)
         if check:
             status, detail = Status.FLAGGED, check
             log.warning("solve_nonlinear: %s", check)

@@ -48,6 +48,7 @@ from ..fem.corotational_system import apply_increment
 from ..model.frame import Frame
 from ..model.scene import Plate, Scene, parse_loads
 from .ccd import pair_step_bound, plate_step_bound
+from .friction import friction_potential
 from .ipc_scene import ContactScene, PlateState, friction_setup
 from .ipc_system import SystemMixin, _StepFailed, lag_change, serial_numba
 from .options import Contact
@@ -175,7 +176,8 @@ class IncrementalSolver(SystemMixin):
         ghat = contact.barrier_gap * float(r.min())
         kappa = contact.barrier_stiffness or float(np.mean(frame.EA / frame.length))
         enf = Enforcement("barrier", ghat=ghat, kappa=kappa)
-        self.ghat, self.kappa, self.eps_v = ghat, kappa, contact.friction_slip
+        eps_v = contact.friction_slip if contact.friction_slip is not None else 1e-3 * float(r.min())
+        self.ghat, self.kappa, self.eps_v = ghat, kappa, eps_v
         fc = np.array([p.force_controlled for p in sc.plates], dtype=bool)
         self.plates = PlateState(z=np.array([float(p.z) for p in sc.plates]),
                                  normal=np.array([int(p.normal) for p in sc.plates]), force_controlled=fc)
@@ -337,7 +339,7 @@ class IncrementalSolver(SystemMixin):
         z_start = self.plates.z.copy()
         self.delta = min(self.delta, self.s.delta_max)
         self.M = None
-        lag = self.scene.friction_lag(x_start, z_start)
+        lag = start_lag = self.scene.friction_lag(x_start, z_start)
         rounds = self.s.friction_rounds if self.scene.has_friction else 1
         for rnd in range(rounds):
             self._newton(target_u, target_z, x_start, lag)
@@ -354,10 +356,19 @@ class IncrementalSolver(SystemMixin):
         self._assemble(ev)
         self.sys.factor(inertia=True)
         info.negative_eigenvalues = int(self.sys.negative) if self.sys.negative is not None else -1
-        info.dissipation = float(sum(fr.dissipation for _, fr in ev["fric"]))
+        if self.scene.has_friction:
+            # trapezoidal in the normal forces: those of the step's start and of its end state
+            info.dissipation = 0.5 * (self._dissipation(start_lag, x_start) + self._dissipation(lag, x_start))
         info.delta = self.delta
         info.extra.update(ev=ev, x_start=x_start)
         return info
+
+    def _dissipation(self, lag, x_start) -> float:
+        """Energy friction dissipates over the step to the current state with the normal forces,
+        bases and closest points of ``lag`` (N mm; :func:`~homtex.contact.friction.friction_potential`)."""
+        x = self.positions
+        return float(sum(friction_potential(lg, x, x_start, self.eps_v, hessian=False).dissipation
+                         for lg in lag if lg is not None and len(lg)))
 
     def _remaining(self, target_u, target_z) -> np.ndarray:
         d = np.zeros((self.N, 6))

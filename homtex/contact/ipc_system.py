@@ -17,7 +17,7 @@ import contextlib
 import numba
 import numpy as np
 
-from ..analysis.energy import balance
+from ..analysis.energy import balance, energy_floor
 from ..analysis.tangent import FreeSystem
 from ..fem.corotational_system import element_matvec_serial, spin_between
 from .friction import friction_potential
@@ -189,6 +189,7 @@ class SystemMixin:
 
     # ------------------------------------------------------------------ energy ledger
     def _start_ledger(self) -> None:
+        self.energy_floor = energy_floor(self.frame)
         ev = self._evaluate(self.positions, [], hessian=False)
         self._ev0 = {"U": ev["U"], "B": ev["B"]}
         self.ledger = {"external_work": 0.0, "prestrain_work": 0.0, "dissipation": 0.0, "stabilization": 0.0,
@@ -234,7 +235,7 @@ class SystemMixin:
         """The relative energy balance of the path so far (:func:`homtex.analysis.energy.balance`)."""
         L = self.ledger
         return balance(L["external_work"], L["prestrain_work"], L["strain_energy"], L["contact_energy"],
-                       L["dissipation"], L["stabilization"])
+                       L["dissipation"], L["stabilization"], floor=self.energy_floor)
 
 
 

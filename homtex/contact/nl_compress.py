@@ -196,10 +196,10 @@ def _buckling(cv, test) -> float:
     return first_buckling_strain((cv.z0 - h[:, 0]) / test.H0, h[:, 1])
 
 
-def _checks(ds) -> str:
+def _checks(ds, floor: float = 0.0) -> str:
     """'' if the curve passes the energy checks, else what fails (and where)."""
     return ledger_check(ds["external_work"].values, ds["prestrain_work"].values, ds["stabilization_energy"].values,
-                        ds["energy_balance"].values, ds["strain"].values, level_name="strain")
+                        ds["energy_balance"].values, ds["strain"].values, level_name="strain", floor=floor)
 
 
 def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, friction_spec: dict | None = None,
@@ -269,7 +269,7 @@ def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, 
                                  "stiffness (d F / d strain <= 0.5 x its first value)",
         seconds=time.perf_counter() - t0, searches=int(sol.scene.searches))
     if status is Status.OK:
-        check = _checks(ds)
+        check = _checks(ds, sol.energy_floor)
         if check:
             status, detail = Status.FLAGGED, check
             log.warning("compress: %s", check)

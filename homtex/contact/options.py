@@ -59,8 +59,10 @@ class Contact:
         and the contact surfaces are found to within that distance).
     barrier_stiffness : barrier stiffness kappa, N/mm (default: the mean axial stiffness EA / L
         of the elements).
-    friction_slip : slip (mm) at which the smoothed Coulomb friction saturates (eps_v; below it
-        a contact sticks elastically).
+    friction_slip : slip (mm) per step at which the smoothed Coulomb friction saturates (eps_v;
+        below it a contact sticks elastically). Default: 1e-3 x the thinnest contact radius (1e-4 mm
+        for 0.1 mm yarns): steps that slide a contact by less than eps_v see a friction force below
+        mu N, so eps_v must stay well below the slip of a step on the thinnest yarns.
     max_forward_error : with the direct solver, each solve is refined once; a relative
         correction above this (an ill-conditioned system, e.g. a penalty far above the beam
         stiffness) raises SolverError instead of returning an inaccurate state.
@@ -87,7 +89,7 @@ class Contact:
     plate_friction: float | None = None
     barrier_gap: float = 0.01
     barrier_stiffness: float | None = None
-    friction_slip: float = 1e-4
+    friction_slip: float | None = None
 
     def __post_init__(self):
         def named(name):
@@ -118,7 +120,8 @@ class Contact:
         if self.barrier_stiffness is not None:
             self.barrier_stiffness = check_number(self.barrier_stiffness, named("barrier_stiffness") + " (N/mm)",
                                                   gt=0.0, le=1e12)
-        self.friction_slip = check_number(self.friction_slip, named("friction_slip") + " (mm)", gt=0.0, le=1.0)
+        if self.friction_slip is not None:
+            self.friction_slip = check_number(self.friction_slip, named("friction_slip") + " (mm)", gt=0.0, le=1.0)
 
     @property
     def has_friction(self) -> bool:
