@@ -12,7 +12,7 @@ from test_corotational import bend_frame, planar
 
 import homtex
 from homtex import solve_nonlinear
-from homtex.errors import SolverError
+from homtex.errors import StrainWarning
 
 E, NU = 2000.0, 0.3
 
@@ -112,7 +112,8 @@ def test_arclength_switches_to_the_bent_branch_of_a_perfect_column():
     lee, fixed, load = lee_frame(5)
     with pytest.warns(RuntimeWarning, match="steps spent"):
         short = solve_nonlinear(lee, fixed, {load: (0, -3.0, 0, 0, 0, 0)}, control="arclength", steps=8)
-    assert short.load_factor < 1.0 and short.path.attrs["status"].startswith("steps spent")
+    assert short.load_factor < 1.0 and short.path.attrs["status"] == "flagged"
+    assert short.path.attrs["status_detail"].startswith("steps spent")
 
 
 @pytest.mark.parametrize("steps", [7, 29, 30, 31, 57])
@@ -201,29 +202,50 @@ def test_lee_frame_limit_load_converges_at_order_two():
     assert lims[-1] == pytest.approx(1.8545, abs=1e-3)
 
 
-@pytest.mark.parametrize("steps", [2, 7, 20, 50])
-def test_lee_frame_under_load_control_raises_at_the_limit_point(steps):
-    """Load control past the limit point: a SolverError that names the limit load (within 0.5 %)
-    and the remedy, not 'more steps'."""
+@pytest.fixture(scope="module")
+def lee_arc():
+    """Lee's frame by arc length: the reference load 3.0, and the prescribed motion v = 120."""
     fr, fixed, load = lee_frame(10)
-    with pytest.raises(SolverError, match="limit point") as err:
-        solve_nonlinear(fr, fixed, {load: (0, -3.0, 0, 0, 0, 0)}, steps=steps)
-    assert "control='arclength'" in str(err.value)
-    lam = float(str(err.value).split("cannot pass ")[1].split(":")[0])
-    assert 3 * lam == pytest.approx(1.8647, rel=5e-3)
+    loaded = solve_nonlinear(fr, fixed, {load: (0, -3.0, 0, 0, 0, 0)}, control="arclength", steps=300)
+    fixed[load] = {1: -120.0, 2: 0.0, 3: 0.0, 4: 0.0}
+    with pytest.warns(StrainWarning):
+        moved = solve_nonlinear(fr, fixed, None, control="arclength", steps=400)
+    return loaded, moved
+
+
+@pytest.mark.parametrize("steps", [2, 7, 20, 50])
+def test_lee_frame_under_load_control_snaps_at_the_limit_point(steps, lee_arc):
+    """Load control past the limit point: the limit load is recorded (within 0.5 %) where the frame
+    snaps; it lands on the stable branch that arc length reaches and goes on to the full load (the
+    same state to 1e-8); the energy the snap released is recorded and the path flagged for it."""
+    fr, fixed, load = lee_frame(10)
+    res = solve_nonlinear(fr, fixed, {load: (0, -3.0, 0, 0, 0, 0)}, steps=steps)
+    p = res.path
+    assert 3 * p.attrs["snap_load_factors"][0] == pytest.approx(1.8647, rel=5e-3)
+    assert res.load_factor == 1.0 and res.stable and bool(p.stable.all())
+    assert np.abs(res.x - lee_arc[0].x).max() < 1e-8 * 120
+    released = float(p.stabilization_energy[-1])
+    assert released > 0.3 * float(p.external_work[-1])
+    assert abs(float(p.energy_balance[-1])) < 0.01          # the ledger closes with what the snap released
+    assert p.attrs["status"] == "flagged" and "snap" in p.attrs["status_detail"]
 
 
 @pytest.mark.parametrize("steps", [10, 27, 40, 57])
-def test_lee_frame_displacement_control_raises_at_the_turning_point(steps):
+def test_lee_frame_displacement_control_snaps_at_the_turning_point(steps, lee_arc):
     """Silent failure 3: displacement control of the load node past the snap-back jumped to a far
-    branch (12 % strain, a force of -1081). Now the turning point (v = 61.1) is found and raised."""
+    branch (12 % strain, a force of -1081) without a trace. Now the turning point (v = 61.1) is
+    recorded where the frame snaps, onto the stable branch of the arc-length path (same final state
+    to 1e-7), and the path is flagged for the energy released."""
     fr, fixed, load = lee_frame(10)
     fixed[load] = {1: -120.0, 2: 0.0, 3: 0.0, 4: 0.0}
-    with pytest.raises(SolverError, match="turning point") as err:
-        solve_nonlinear(fr, fixed, None, control="displacement", steps=steps)
-    assert "control='arclength'" in str(err.value)
-    lam = float(str(err.value).split("load factor ")[1].split(":")[0])
-    assert 120 * lam == pytest.approx(61.1, abs=0.3)
+    with pytest.warns(StrainWarning):
+        res = solve_nonlinear(fr, fixed, None, control="displacement", steps=steps)
+    p = res.path
+    assert 120 * p.attrs["snap_load_factors"][0] == pytest.approx(61.1, abs=0.3)
+    assert res.load_factor == 1.0 and res.stable
+    assert np.abs(res.x - lee_arc[1].x).max() < 1e-7 * 120
+    assert float(p.stabilization_energy[-1]) > 0.0 and abs(float(p.energy_balance[-1])) < 0.01
+    assert p.attrs["status"] == "flagged" and "snap" in p.attrs["status_detail"]
 
 
 def test_arclength_with_a_prescribed_motion_passes_the_turning_point():

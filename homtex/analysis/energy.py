@@ -85,3 +85,29 @@ def ledger_check(external_work, prestrain_work, stabilization_energy, energy_bal
     if bal.size and not np.all(np.isfinite(bal)):
         msgs.append("the energy ledger is not finite")
     return "; ".join(msgs)
+
+
+#: 3-point Gauss-Legendre rule on [0, 1] (exact for the degree-5 integrand of :func:`hermite_work`)
+_GAUSS_X = 0.5 + 0.5 * np.array([-np.sqrt(0.6), 0.0, np.sqrt(0.6)])
+_GAUSS_W = np.array([5.0, 8.0, 5.0]) / 18.0
+
+
+def hermite_work(Fa, Fb, dU, Ta, Tb, KTa, KTb) -> float:
+    """Work of the external forces along one step of an equilibrium path, N mm.
+
+    The path between two equilibrium states is interpolated by cubic Hermite polynomials in the
+    step parameter sigma in [0, 1]: the motion U(sigma) from its increment ``dU`` (6n,) and its
+    end tangents ``Ta``, ``Tb`` (6n,: dU/dsigma, oriented along the step), the external force
+    F(sigma) (= the internal force at equilibrium, loads and reactions) from ``Fa``, ``Fb`` and
+    its rates ``KTa`` = K_a Ta, ``KTb`` = K_b Tb (the tangent stiffness times the path tangent).
+    W = int F . dU/dsigma dsigma by 3-point Gauss (exact for the cubics): fourth order in the step
+    where the trapezoidal rule is second order."""
+    w = 0.0
+    for s, g in zip(_GAUSS_X, _GAUSS_W):
+        h00, h10 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s
+        h01, h11 = -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
+        d10, d01, d11 = 3 * s ** 2 - 4 * s + 1, -6 * s ** 2 + 6 * s, 3 * s ** 2 - 2 * s
+        F = h00 * Fa + h10 * KTa + h01 * Fb + h11 * KTb
+        dUs = d01 * dU + d10 * Ta + d11 * Tb           # U(0) = 0, U(1) = dU
+        w += g * float(F @ dUs)
+    return w

@@ -13,15 +13,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse.linalg as spla
 
 from ..errors import SolverError
 from ..fem.corotational_system import apply_increment, element_matvec, element_matvec_serial, spin_between
 from .corotational import PARALLEL_ELEMENTS, Corotational
-from .tangent import FreeSystem, real_negative_eigenvalues
+from .tangent import FreeSystem, one_blas_thread, real_negative_eigenvalues
 
 #: largest deformational rotation (rad) an iterate may reach: beyond it the element's local
 #: rotation vector nears pi (log map singular) and the co-rotational small-strain element is void
 MAX_DEFORMATIONAL_ROTATION = 2.0
+
+#: eigenvalues of the diagonally scaled tangent within +-NEUTRAL of zero are neutral (round-off of a
+#: zero-energy mode such as a round rod's bending plane turning about its load: 1e-15 to 1e-13), not
+#: unstable; below it, 1e-2 of the structure's softest mode at the start (a rod of L/r = 1e4 reads
+#: 3e-11), down to 1e-15
+NEUTRAL = 1e-12
 
 
 class StepFailed(Exception):
@@ -90,6 +97,7 @@ class Equilibrium:
         self.negative = None
         self.evaluations = 0
         self.factorisations = 0
+        self.neutral = NEUTRAL
 
     # -- state
     def snapshot(self):
@@ -102,6 +110,15 @@ class Equilibrium:
         self.fresh = False
         if refresh:
             self.refresh()
+
+    def set_neutral(self) -> None:
+        """Neutral tolerance from the softest mode of the current (initial, factored) state."""
+        try:
+            mu = float(self.lowest_modes(1)[0][0])
+        except Exception:       # noqa: BLE001 - an eigensolver failure leaves the default
+            return
+        if mu > 0:
+            self.neutral = float(np.clip(1e-2 * mu, 1e-15, NEUTRAL))
 
     def refresh(self):
         """Forces, element tangents and the factor (with inertia) at the current state."""
@@ -144,8 +161,19 @@ class Equilibrium:
         self.factorisations += 1
         self.negative = None
         if inertia:
-            self.negative = (real_negative_eigenvalues(self.sys.full(self.cor.Ke)) if self.nonconservative
-                             else self.sys.negative)
+            if self.nonconservative:
+                self.negative = real_negative_eigenvalues(self.sys.full(self.cor.Ke))
+            else:
+                self.negative = self.sys.negative
+                if self.negative:
+                    self.negative = self._without_neutral(self.negative)
+
+    def _without_neutral(self, raw: int) -> int:
+        """Negative pivots of LDL^T that are truly negative eigenvalues: the lowest eigenvalues of the
+        scaled tangent below -NEUTRAL (a neutral mode, e.g. the bending plane of a round rod turning
+        about its load, reads +-1e-15 and its pivot's sign is round-off)."""
+        mu, _ = self.lowest_modes(min(raw + 2, max(self.sys.nf - 1, 1)))
+        return int(np.count_nonzero(mu < -self.neutral))
 
     def k_times(self, v6: np.ndarray) -> np.ndarray:
         """(6n,) K v with the element tangents at the last evaluation (full, nonsymmetric)."""
@@ -155,6 +183,43 @@ class Equilibrium:
         kern(p.node_ptr, p.inc_elem, p.inc_end, self.frame.elements, self.cor.Ke,
                        np.ascontiguousarray(v6.reshape(self.n, 6)), out)
         return out.ravel()
+
+    def tangent_vector(self) -> np.ndarray:
+        """(6n,) du / dlambda at the current (fresh: factored) state: the tangent solve on the free
+        DOFs, u_bar on the prescribed ones."""
+        t = self.ubar.ravel().copy()
+        t[self.free] = self.sys.solve(self.load_direction())
+        return t
+
+    def lowest_modes(self, k: int = 1):
+        """The k eigenvalues of the diagonally scaled free tangent D^-1/2 K D^-1/2 nearest to zero
+        (ascending; the scaling keeps the inertia and makes translations and rotations commensurate:
+        a neutral mode reads about 1e-15, a bending mode of a very slender rod 1e-11) and their modes
+        as (6n, k) increments (free DOFs; unit largest weighted entry), at the last assembly."""
+        S = self.sys.symmetric()
+        nf = S.shape[0]
+        d = np.abs(S.diagonal())
+        d = np.where(d > 0, d, max(float(d.max(initial=1.0)), 1.0))
+        sc = 1.0 / np.sqrt(d)
+        Ss = (S.multiply(sc[:, None]).multiply(sc[None, :])).tocsc()
+        k = max(1, min(k, nf - 1))
+        if nf <= 400:
+            with one_blas_thread():
+                mu, V = np.linalg.eigh(Ss.toarray())
+            order = np.argsort(np.abs(mu))[:k]
+            mu, V = mu[order], V[:, order]
+        else:
+            try:
+                mu, V = spla.eigsh(Ss, k=k, sigma=0.0, which="LM", tol=1e-10)
+            except RuntimeError:            # exactly singular: shift a little
+                mu, V = spla.eigsh(Ss, k=k, sigma=-1e-8, which="LM", tol=1e-10)
+        order = np.argsort(mu)
+        mu, V = mu[order], V[:, order] * sc[:, None]
+        modes = np.zeros((6 * self.n, len(mu)))
+        modes[self.free] = V
+        for c in range(modes.shape[1]):
+            modes[:, c] /= max(float(np.abs(self.w * modes[:, c]).max()), 1e-300)
+        return mu, modes
 
     def load_direction(self) -> np.ndarray:
         """dR/dlambda on the free DOFs: f - K u_bar (the prescribed motions push the free DOFs)."""

@@ -4,23 +4,20 @@ All three move the load factor lambda that scales the loads and the prescribed m
 :mod:`homtex.analysis.equilibrium`); they differ in what is prescribed in a step:
 
 * ``"load"`` / ``"displacement"``: lambda. The requested ``steps`` are cut in halves where a step
-  fails (Newton does not converge, an element turns too far, or the corrector lands further from
-  the tangent predictor than the predicted step itself: a jump to another branch); they grow
-  back after easy steps; a step whose displacement per unit load factor grows more than
-  ``max_growth`` (5) times over the previous step's is cut too (the path turns ahead). Every
-  converged state's inertia is checked: an unstable state is never
-  accepted (:func:`homtex.analysis.stability.restabilize` locates the critical point and takes the
-  stable branch along the critical mode). A step that cannot be completed at any size ends in a
-  :class:`~homtex.errors.SolverError` that names the limit point (or the turning point of the
-  prescribed motion) and the remedy, control="arclength".
-* ``"arclength"``: Crisfield's cylindrical arc length (|du|_W = ds, rotations weighted by the
-  structure size) with the root of the smallest turn, the predictor direction kept by the sign of
-  its product with the previous increment (through limit points), ds adapted to the Newton
-  iterations (``desired_iterations``). It stops on the first crossing of lambda = 1 (the last
-  state is corrected onto lambda = 1 exactly) or when ``steps`` increments are spent. A step whose
-  inertia grows while its critical mode is orthogonal to the load (a symmetric bifurcation, not a
-  limit point) is moved to the stable branch along the mode
-  (:func:`homtex.analysis.stability.arc_bifurcation`).
+  fails (Newton does not converge, an element turns too far, the corrector lands further from
+  the tangent predictor than the predicted step itself, the displacement per unit load grows
+  more than ``max_growth`` (5) times over the previous step's, or the step's work misses its
+  strain energy: it spans a jump); they grow back after easy steps. Every converged state's
+  inertia is checked: an unstable state is never accepted. At a bifurcation the secondary branch
+  is followed along the critical mode; at a limit point of the load (or a turning point of the
+  prescribed motion) the state snaps to the stable branch at the same load factor and the energy
+  released is recorded (:mod:`homtex.analysis.stability`); the path is then flagged.
+* ``"arclength"``: Crisfield's cylindrical arc length with the acceptance checks of
+  :mod:`homtex.analysis.continuation` (no step spans more than one critical point or an unstable
+  branch; the arc adapts to the Newton iterations). Limit points are located inside their step
+  and recorded; at a symmetric bifurcation (critical mode orthogonal to the load) the path
+  switches to the secondary branch along the mode. It stops on the first crossing of lambda = 1
+  (the last state is corrected onto lambda = 1 exactly) or when ``steps`` increments are spent.
 """
 
 from __future__ import annotations
@@ -30,9 +27,10 @@ import logging
 import numpy as np
 
 from ..errors import SolverError
+from .continuation import ENERGY_TOL, checked_arc_step, critical_point, land, locate_limit, mode_along
 from .equilibrium import Equilibrium, StepFailed
 from .records import PathRecorder
-from .stability import arc_bifurcation, diagnose_failure, restabilize
+from .stability import ORTHOGONAL, handle_unstable, is_limit, not_converged, snap_through
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +44,6 @@ def follow_lambda(eq: Equilibrium, rec: PathRecorder, steps: int, control: str) 
     eq.refresh()
     rec.start(eq)
     k = 1                                   # next requested step
-    last_error = None
     rate = None                             # |du| / dlambda of the last accepted step
     while eq.lam < 1.0 - 1e-12:
         target = min(k / steps, eq.lam + h)
@@ -58,26 +55,33 @@ def follow_lambda(eq: Equilibrium, rec: PathRecorder, steps: int, control: str) 
             it, rn, pred = eq.correct(target, cap)
             _check_jump(eq, snap, pred)
             rate = _check_growth(eq, snap, rate, target - snap[2])
+            if not eq.negative:
+                err = rec.step_energy_error(eq, rec.prev, rec.ends(eq))
+                if err > ENERGY_TOL:
+                    raise StepFailed(f"the step's work misses its strain energy by {100 * err:.3g} % (a jump)")
         except StepFailed as err:
-            last_error = err
             eq.restore(snap)
             h = 0.5 * (target - snap[2])
             rec.cuts += 1
             log.debug("step to lambda %.6g failed (%s); cut to %.3g", target, err.reason, h)
             if h < h_min:
-                raise diagnose_failure(eq, rec, control, target, last_error) from None
+                limit, ratio = is_limit(eq, rec)
+                if not limit:
+                    raise not_converged(eq, control, target, err, ratio) from None
+                snap_through(eq, rec, control, target)
+                h, rate = h_max, None
             continue
-        switched = False
         if s.stability and eq.negative:
-            it = restabilize(eq, rec, snap, control)
-            rn = float(np.linalg.norm(eq.residual(eq.lam)))
-            switched = True
+            handle_unstable(eq, rec, snap, control)
             rate = None
-        rec.record(eq, it, rn, snap)
-        if not switched and it <= s.desired_iterations + 1:
-            h = min(h_max, 2.0 * h)
+        else:
+            rec.record(eq, it, rn, snap)
+            if it <= s.desired_iterations + 1:
+                h = min(h_max, 2.0 * h)
         if abs(eq.lam - k / steps) < 1e-12:
             k += 1
+        elif eq.lam > k / steps:                 # a branch switch or snap went past requested levels
+            k = int(np.floor(eq.lam * steps + 1e-9)) + 1
 
 
 def _check_jump(eq: Equilibrium, snap, pred: np.ndarray) -> None:
@@ -106,23 +110,23 @@ def follow_arclength(eq: Equilibrium, rec: PathRecorder, steps: int, arc_length:
     s = eq.s
     eq.refresh()
     rec.start(eq)
-    q = eq.load_direction()
-    t = _tangent_vector(eq, eq.sys.solve(q))
+    t = eq.tangent_vector()
     nt = eq.norm(t)
-    if nt == 0.0:
-        raise SolverError("control='arclength' needs a reference load or a prescribed motion that moves the frame")
+    if nt == 0.0 or not np.isfinite(nt):
+        raise SolverError("control='arclength' needs a reference load or a prescribed motion that moves the frame "
+                          f"by a finite amount (the linear response to it has size {nt:.3g})")
     ds0 = nt / steps if arc_length is None else float(arc_length)
     ds = ds0
-    ds_min = ds0 / 2.0 ** s.max_cuts
+    ds_min = ds0 / 2.0 ** (s.max_cuts + 10)
     # largest arc: 1000 first arcs, or every node moving by 5 % of the structure size
     ds_max = max(1e3 * ds0, 0.05 * eq.length * np.sqrt(eq.n))
     prev = None                              # previous converged increment (6n,)
-    neg_prev = -1 if eq.negative is None else int(eq.negative)
+    neg = -1 if eq.negative is None else int(eq.negative)
     done = 0
     while done < steps:
         snap = eq.snapshot()
         try:
-            it, rn, dlam, inc = _arc_step(eq, ds, prev)
+            arc = checked_arc_step(eq, rec, ds, t, prev, neg)
         except StepFailed as err:
             eq.restore(snap)
             ds *= 0.5
@@ -132,94 +136,60 @@ def follow_arclength(eq: Equilibrium, rec: PathRecorder, steps: int, arc_length:
                 raise SolverError(f"control='arclength': no converged step at lambda = {snap[2]:.6g} down to an arc "
                                   f"length of {ds:.3g} ({err.reason})") from None
             continue
-        if s.stability and arc_bifurcation(eq, rec, snap, neg_prev):
-            inc = eq.increment_since(snap)          # the switch: the next predictor keeps its sense
-            ds = max(ds, eq.norm(inc))              # and the secondary branch sets the scale
-        if snap[2] < 1.0 <= eq.lam:
-            _land_on_one(eq, rec, snap, it)
+        lam0 = snap[2]
+        if np.sign(arc.slope0) != np.sign(arc.slope1):
+            rec.event("limit", locate_limit(eq, snap, t, prev, ds, arc), arc.negative)
+        elif s.stability and neg >= 0 and arc.negative > neg and not eq.nonconservative:
+            switched = _arc_bifurcation(eq, rec, snap, neg, arc)
+            if switched is not None:
+                arc = switched
+        if lam0 < 1.0 <= eq.lam and land(eq, rec, snap, 1.0):
+            rec.record(eq, arc.iterations, arc.residual, snap, arc=True)
             return
-        rec.record(eq, it, rn, snap, arc=True)
-        neg_prev = -1 if eq.negative is None else int(eq.negative)
+        rec.record(eq, arc.iterations, arc.residual, snap, arc=True)
+        prev, t, neg = arc.inc, arc.tangent, arc.negative
         done += 1
-        prev = inc
-        ds = min(ds * float(np.clip(np.sqrt(s.desired_iterations / max(it, 1)), 0.5, 2.0)), ds_max)
+        ds = min(ds * float(np.clip(np.sqrt(s.desired_iterations / max(arc.iterations, 1)), 0.5, 2.0)), ds_max)
     rec.spent(eq)
 
 
-def _tangent_vector(eq: Equilibrium, du_free: np.ndarray) -> np.ndarray:
-    """(6n,) increment per unit load factor: du on the free DOFs, u_bar on the prescribed ones."""
-    t = eq.ubar.ravel().copy()
-    t[eq.free] = du_free
-    return t
-
-
-def _arc_step(eq: Equilibrium, ds: float, prev):
-    """One arc-length increment of radius ``ds`` from the converged state; returns (iterations,
-    residual, delta lambda, (6n,) increment)."""
-    s = eq.s
-    if not eq.fresh:
-        eq.refresh()
-    t = _tangent_vector(eq, eq.sys.solve(eq.load_direction()))
-    nt = eq.norm(t)
-    sign = 1.0
-    if prev is not None:
-        sign = 1.0 if float((eq.w * t) @ (eq.w * prev)) >= 0.0 else -1.0
-    dlam = sign * ds / nt
-    lam0 = eq.lam
-    inc = eq.apply(dlam * t[eq.free], dlam)
-    eq.lam = lam0 + dlam
-    it = 1
-    while True:
+def _arc_bifurcation(eq: Equilibrium, rec: PathRecorder, snap, neg0: int, arc):
+    """The arc step from ``snap`` raised the inertia without a turn of the load factor. If the
+    critical mode is orthogonal to the load (a symmetric bifurcation), record it and step from the
+    critical state onto the secondary branch along the mode; returns the new step (its state
+    current), or None (the path goes on as it is: recorded as a bifurcation all the same)."""
+    here = eq.snapshot()
+    mu, modes = eq.lowest_modes(2)
+    phi = modes[:, 0]
+    q = eq.load_direction()
+    cos = abs(float(phi[eq.free] @ q)) / max(float(np.linalg.norm(phi[eq.free]) * np.linalg.norm(q)), 1e-300)
+    lam_c = critical_point(eq, snap, here[2], float(mu[0]))
+    rec.event("bifurcation", lam_c, arc.negative)
+    if cos > ORTHOGONAL:
+        eq.restore(here)
+        return None
+    eq.restore(snap)
+    try:
+        eq.correct(lam_c)
+        if eq.negative:
+            raise StepFailed("past the critical point")
+    except StepFailed:
+        eq.restore(snap)
+    rec.record(eq, 0, float(np.linalg.norm(eq.residual(eq.lam))), snap, arc=True)
+    mode = mode_along(eq, phi)
+    rec.along(eq, mode)             # the path leaves the critical state along the mode
+    amp = eq.s.perturbation * eq.length
+    start = eq.snapshot()
+    for a in (amp, 0.25 * amp, 0.0625 * amp):
         try:
-            eq.evaluate()
-        except SolverError as err:
-            raise StepFailed(str(err)) from None
-        r = eq.residual(eq.lam)
-        rn = float(np.linalg.norm(r))
-        eq.check_iterate(rn, it)
-        if eq.converged(rn, eq.lam):
-            break
-        if it >= s.max_iter:
-            raise StepFailed(f"did not converge in {s.max_iter} iterations (out-of-balance {rn:.3e})", rn)
-        eq.factor()
-        dI = eq.sys.solve(r)
-        tII = _tangent_vector(eq, eq.sys.solve(eq.load_direction()))
-        vI = np.zeros_like(inc)
-        vI[eq.free] = dI
-        wa, wb, wt = eq.w * (inc + vI), eq.w * tII, eq.w * inc
-        a = float(wb @ wb)
-        b = 2.0 * float(wa @ wb)
-        c = float(wa @ wa) - ds * ds
-        disc = b * b - 4.0 * a * c
-        if disc < 0.0:
-            raise StepFailed("the arc-length constraint has no real root (step too large)", rn)
-        sq = np.sqrt(disc)
-        roots = ((-b + sq) / (2 * a), (-b - sq) / (2 * a))
-        # the root whose new increment turns least from the current one
-        dl = max(roots, key=lambda x: float((wa + x * wb) @ wt))
-        d = vI + dl * tII
-        eq.apply(d[eq.free], dl)
-        eq.lam += dl
-        inc = inc + d
-        it += 1
-    eq.factor(inertia=s.stability)
-    eq.fresh = True
-    return it, rn, eq.lam - lam0, inc
-
-
-def _land_on_one(eq: Equilibrium, rec: PathRecorder, snap, it_arc: int) -> None:
-    """The arc step crossed lambda = 1: correct onto lambda = 1 exactly (Newton at fixed lambda from
-    the nearer of the two states) and record that state as the last one."""
-    after = eq.snapshot()
-    for start in ((after, snap) if eq.lam - 1.0 <= 1.0 - snap[2] else (snap, after)):
-        eq.restore(start)
-        try:
-            it, rn, pred = eq.correct(1.0)
-            _check_jump(eq, start, pred)
+            out = checked_arc_step(eq, rec, a, eq.tangent_vector(), None, -1, predictor=(a * mode, 0.0))
         except StepFailed:
+            eq.restore(start)
             continue
-        rec.record(eq, it_arc + it, rn, snap, arc=True)
-        return
-    eq.restore(after)
-    raise SolverError(f"control='arclength': the step from lambda = {snap[2]:.6g} to {after[2]:.6g} crosses 1 but "
-                      "no equilibrium at lambda = 1 was found from either end")
+        rec.event("switch", eq.lam, arc.negative)
+        rec.switches.append((float(start[2]), float(a)))
+        log.info("arc length: bifurcation at lambda = %.6g, switched to the secondary branch (perturbation %.3g mm)",
+                 lam_c, a)
+        return out
+    eq.restore(here)
+    return None
