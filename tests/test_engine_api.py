@@ -176,3 +176,30 @@ def test_options_that_are_accepted_work_at_their_extremes(case, steps):
     assert float(p.min_gap.min()) > 0.0 and int(p.active_yarn_yarn[-1]) > 0
     if "friction" in case:
         assert float(p.friction_energy[-1]) > 0.3 * float(p.external_work[-1])     # most of the slide's work
+
+
+def test_a_perfect_column_pressed_between_plates_buckles_onto_the_elastica():
+    """A straight column (L = 20 mm, r = 0.1 mm, 40 elements) between two frictionless plates, its
+    ends held laterally, the top plate pressed down 10 % of L in 5 steps. Perfect: nothing breaks
+    the symmetry, so the engine stalls at Euler's load or converges to the unstable straight
+    state; each such state is left along its critical mode by a recorded perturbation and the
+    column buckles: the plate force and the mid-span deflection follow the pinned-pinned elastica
+    for the chord's shortening (force within 0.1 %, deflection within 2 %); the ledger closes."""
+    from scipy.optimize import brentq
+    from scipy.special import ellipe, ellipk
+
+    L, r, n_el, E = 20.0, 0.1, 40, 2000.0
+    nodes = np.c_[np.zeros(n_el + 1), np.zeros(n_el + 1), np.linspace(0, L, n_el + 1)]
+    fr = homtex.Frame(nodes, np.c_[np.arange(n_el), np.arange(1, n_el + 1)], radius=r, E=E, nu=0.3)
+    Pcr = np.pi ** 2 * E * np.pi * r ** 4 / 4 / L ** 2
+    plates = [homtex.Plate(z=-1.01 * r, normal=1), homtex.Plate(z=L + 1.01 * r, normal=-1, displacement=-0.1 * L)]
+    res = homtex.solve_nonlinear(fr, {0: [0, 1, 5], n_el: [0, 1]}, None, contact=homtex.Contact(), plates=plates,
+                                 steps=5)
+    p = res.path
+    assert p.attrs["status"] == "ok" and np.abs(p.energy_balance.values).max() < 0.01
+    assert len(p.attrs["branch_switches"]) >= 2                      # recorded: (level, perturbation mm)
+    d = 1 - (res.x[n_el, 2] - res.x[0, 2]) / L
+    m = brentq(lambda m: 2 - 2 * ellipe(m) / ellipk(m) - d, 1e-9, 0.9999)
+    assert float(p.plate_force[-1, 1]) == pytest.approx((2 * ellipk(m) / np.pi) ** 2 * Pcr, rel=1e-3)
+    assert np.hypot(res.x[:, 0], res.x[:, 1]).max() == pytest.approx(L * np.sqrt(m) / ellipk(m), rel=0.02)
+    assert bool(p.stable[-1])

@@ -41,6 +41,9 @@ __all__ = ["EngineStepper", "run_engine"]
 
 log = logging.getLogger(__name__)
 
+#: an eigenvalue of the scaled Hessian below -NEGATIVE is a buckling state (not round-off)
+NEGATIVE = 1e-11
+
 _LEDGER = ("external_work", "prestrain_work", "strain_energy", "contact_energy", "dissipation", "stabilization")
 
 
@@ -56,6 +59,11 @@ class EngineStepper:
     refine : a step whose imbalance or stabilisation exceeds this share of its work is halved.
     on_accept : called with the StepInfo of every accepted sub-step; whatever it returns is kept in
         ``accepted`` (rolled back with the sub-steps a refinement replaces).
+
+    A step that stalls on buckling beams, or converges to a state with a negative eigenvalue (a
+    perfect structure past its bifurcation), is left along the critical mode by half the
+    thinnest contact radius (cut by the collision check) and taken again: ``events`` records
+    each such perturbation (level, amplitude in mm).
     """
 
     def __init__(self, sol: IncrementalSolver, solve: Callable[[float], StepInfo], *, max_cuts: int = 4,
@@ -66,6 +74,8 @@ class EngineStepper:
         self.level = float(start)
         self.accepted: list = []
         self.totals = {"iterations": 0, "factorisations": 0, "substeps": 0}
+        self.events: list = []           # (level at the step's start, perturbation applied, mm)
+        self.perturbation = 0.5 * float(sol.frame.contact_radius.min())
 
     def advance(self, level: float, depth: int = 0) -> StepInfo:
         """Reach ``level`` from the current one (SolverError when a step fails at every depth)."""
@@ -77,9 +87,13 @@ class EngineStepper:
         try:
             info = self._solve(level)
         except SolverError:
-            if depth >= self.max_cuts:
-                raise
-            return self._halves(level, depth)
+            info = self._leave_along_mode(level) if self.sol.failure_indefinite else None
+            if info is None:
+                if depth >= self.max_cuts:
+                    raise
+                return self._halves(level, depth)
+        if info.negative_eigenvalues > 0:
+            info = self._restabilize(level, info)
         self._accepted(info)
         if depth < self.max_cuts and self._too_coarse({k: L[k] - before[k] for k in _LEDGER}):
             done, coarse, totals1 = self.sol.checkpoint(), self.accepted[n0:], dict(self.totals)
@@ -93,6 +107,60 @@ class EngineStepper:
                 self.accepted[n0:] = coarse
                 self.totals = totals1
         self.level = level
+        return info
+
+    def _leave_along_mode(self, level: float) -> StepInfo | None:
+        """A step that failed on an indefinite Hessian (beams buckling at a symmetric state): leave
+        the step's start along its critical mode (the lowest of its Hessian: near a bifurcation, the
+        buckling mode; a recorded perturbation), let it settle there and take the step again; None
+        when that fails (the start restored)."""
+        cp = self.sol.checkpoint()
+        _, mode = self.sol.critical_mode()
+        try:
+            self._kick_and_settle(mode)
+            return self._solve(level)
+        except SolverError:
+            self.sol.rollback(cp)
+            self.events.pop()
+            return None
+
+    def _restabilize(self, level: float, info: StepInfo, tries: int = 3) -> StepInfo:
+        """An accepted state whose Hessian has a negative eigenvalue (a saddle the step converged
+        to: a perfect structure past its bifurcation) is left along the critical mode and settles,
+        up to ``tries`` times; an unstable state that remains is kept (the path shows its negative
+        eigenvalues)."""
+        for _ in range(tries):
+            mu, mode = self.sol.critical_mode()
+            if not mu < -NEGATIVE:
+                if mu > -NEGATIVE:
+                    info.negative_eigenvalues = 0
+                return info
+            cp = self.sol.checkpoint()
+            try:
+                info = self._kick_and_settle(mode)
+            except SolverError:
+                self.sol.rollback(cp)
+                self.events.pop()
+                return info
+        return info
+
+    def _kick_and_settle(self, mode: np.ndarray) -> StepInfo:
+        """Perturb along ``mode`` by ``perturbation`` (cut by the collision check) and solve again at
+        the current level: the state falls to a stable one nearby. Nothing moves the supports or
+        plates, so no work is done: what the stored energy loses on the way (perturbation and fall
+        together) is what the jump released, and that is the stabilisation it adds to the ledger."""
+        sol = self.sol
+        L = sol.ledger
+        before = {k: L[k] for k in ("strain_energy", "contact_energy", "dissipation", "stabilization",
+                                    "external_work")}
+        amp = sol.perturb(mode, self.perturbation)
+        self.events.append((float(self.level), float(amp)))
+        info = sol.solve()
+        d = {k: L[k] - before[k] for k in before}
+        L["stabilization"] = before["stabilization"] + d["external_work"] - (
+            d["strain_energy"] + d["contact_energy"] + d["dissipation"])
+        log.info("engine: a buckling state at level %.6g left along its critical mode (perturbation %.3g mm)",
+                 self.level, amp)
         return info
 
     def _too_coarse(self, d: dict) -> bool:
@@ -286,7 +354,10 @@ def run_engine(frame, fixed=None, loads=None, *, contact: Contact, plates=None, 
              "barrier_gap_mm": sol.ghat, "barrier_stiffness_N_per_mm": sol.kappa, "friction_slip_mm": sol.eps_v,
              "friction_max": float(max(sol.scene.mu_table.max(initial=0.0), sol.scene.mu_plate.max(initial=0.0))),
              "initial_touching_pairs": sol.scene.initial_touching, "continued": initial is not None,
-             "driven": driven, "seconds": time.perf_counter() - t0}
+             "driven": driven, "seconds": time.perf_counter() - t0,
+             "branch_switches": np.array(stepper.events, dtype=float).reshape(-1),
+             "branch_switches_note": "pairs (load factor at the step's start, perturbation along the critical mode "
+                                     "in mm) of every state left along a critical mode"}
     ds = run.dataset(attrs)
     if status is Status.OK and len(run.rows):
         check = ledger_check(ds.external_work.values, ds.prestrain_work.values, ds.stabilization_energy.values,

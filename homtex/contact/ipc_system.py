@@ -16,10 +16,14 @@ import contextlib
 
 import numba
 import numpy as np
+import scipy.linalg as sla
+import scipy.sparse.linalg as spla
 
 from ..analysis.energy import balance, energy_floor
 from ..analysis.tangent import FreeSystem
 from ..fem.corotational_system import element_matvec_serial, spin_between
+from ..linalg.solvers import blas_single_thread
+from .ccd import pair_step_bound, plate_step_bound
 from .friction import friction_potential
 
 __all__ = ["SystemMixin", "lag_change", "serial_numba"]
@@ -131,6 +135,7 @@ class SystemMixin:
             sys.add_blocks(pl["blocks"], self.plate_slots[pl["active"]])
         for (lg, fr), sl in zip(fric, slots[1:]):
             sys.add_blocks(fr.hess, sl)
+        self._hmax = float(np.abs(sys.diagonal()).max(initial=0.0))
 
     def _friction_slots(self, lg):
         cached = getattr(lg, "slots", None)
@@ -184,8 +189,57 @@ class SystemMixin:
             if not shrink:
                 self.sys.A.data[:] = base
                 return False
+            self.info.extra["indefinite"] = True        # the beams (not the contacts) buckle here
             self.delta = max(self.delta / 4.0, 1e-12)
         raise _StepFailed(f"the tangent stays indefinite at iteration {it} (delta {self.delta:.2e})")
+
+    # ------------------------------------------------------------------ critical modes
+    def critical_mode(self) -> tuple[float, np.ndarray]:
+        """(lowest eigenvalue of the diagonally scaled Hessian of beams and contacts on the free DOFs
+        at the current state, its mode (N, 6) with unit largest translation): the direction a
+        buckling state leaves in (friction left out: its Hessian is positive semi-definite)."""
+        ev = self._evaluate(self.positions, [], hessian=True)
+        self._assemble(ev)
+        S = self.sys.symmetric()
+        d = np.abs(S.diagonal())
+        d = np.where(d > 0, d, max(float(d.max(initial=1.0)), 1.0))
+        sc = 1.0 / np.sqrt(d)
+        Ss = S.multiply(sc[:, None]).multiply(sc[None, :]).tocsc()
+        if Ss.shape[0] <= 400:
+            with blas_single_thread():
+                mu, V = sla.eigh(Ss.toarray(), subset_by_index=[0, 0])
+            mu, v = float(mu[0]), V[:, 0]
+        else:
+            try:
+                mu, V = spla.eigsh(Ss, k=1, sigma=-1e-6, which="LM", tol=1e-8)
+            except RuntimeError:
+                mu, V = spla.eigsh(Ss, k=1, which="SA", tol=1e-6)
+            mu, v = float(mu[0]), V[:, 0]
+        mode = np.zeros(self.N * 6)
+        mode[self.free] = v * sc
+        mode = mode.reshape(self.N, 6)
+        big = float(np.abs(mode[:, :3]).max(initial=0.0))
+        return mu, mode / big if big > 0 else mode
+
+    def perturb(self, mode: np.ndarray, amp: float) -> float:
+        """Move the state by amp x mode (N, 6; mm, rad), cut by the collision check so that no yarn
+        passes through another or a plate; returns the amplitude applied (mm)."""
+        x = self.positions
+        d = amp * mode
+        dx, dz = d[:self.n, :3], d[self.n:, 2]
+        reach = float(np.sqrt(np.einsum("ij,ij->i", dx, dx)).max(initial=0.0))
+        if not self.scene.covers(x, reach):
+            self._search(x, min(max(self.scene.margin, 2.2 * reach + 2.0 * self.ghat), self.max_margin))
+        a = 1.0
+        if len(self.scene.stencil):
+            a = min(a, pair_step_bound(x, dx, self.scene.stencil, eta=self.s.eta))
+        if self.P:
+            pn, pi = self.scene.plate_nodes, self.scene.plate_index
+            a = min(a, plate_step_bound(x, dx, pn, self.scene.node_r[pn], self.plates.origins(), self.plates.normals(),
+                                        plate=pi, plate_motion=np.column_stack([np.zeros((self.P, 2)), dz]),
+                                        eta=self.s.eta))
+        self._apply(a, d)
+        return a * amp
 
     # ------------------------------------------------------------------ energy ledger
     def _start_ledger(self) -> None:
