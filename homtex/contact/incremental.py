@@ -215,6 +215,7 @@ class IncrementalSolver(SystemMixin):
         self.sys = None
         self._coupled = np.zeros((0, 2), dtype=np.int64)
         self.M = None
+        self.terms: list = []       # extra potentials scaled with the pre-strain (:meth:`add_term`)
         self.info = StepInfo()
         self.failure_indefinite = False
         self._hmax = 0.0            # largest diagonal entry of the last assembled Hessian
@@ -228,6 +229,25 @@ class IncrementalSolver(SystemMixin):
                 self.ledger[k] = float(initial.ledger[k])
             self.ledger["strain_energy"] = self._ev0["U"] - self.ledger["U0"]
             self.ledger["contact_energy"] = self._ev0["B"] - self.ledger["B0"]
+
+    def add_term(self, term) -> None:
+        """Add a potential scaled by the pre-strain scale (e.g. a
+        :class:`~homtex.contact.tension.ConstantTension` thread) and restart the energy ledger
+        (call before the first step)."""
+        self.terms.append(term)
+        with serial_numba(self.small):
+            self._start_ledger()
+
+    def restart_at(self, ut: np.ndarray, Q: np.ndarray) -> None:
+        """Move to the translations ``ut`` (n, 3, mm) and rotations ``Q`` (n, 3, 3) of an earlier solve of
+        the same frame and start the energy ledger there (a new path from that state; the contacts
+        are searched again)."""
+        self.cor.ut[...] = ut
+        self.cor.Q[...] = Q
+        with serial_numba(self.small):
+            self.scene.search(self.positions)
+            self._pattern()
+            self._start_ledger()
 
     # ------------------------------------------------------------------ state
     @property

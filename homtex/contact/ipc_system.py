@@ -97,7 +97,14 @@ class SystemMixin:
         g[:self.n, :3] += pc.grad + pl["grad"]
         g[self.n:, 2] = pl["grad_plate"]
         ev = {"U": float(self.cor.energy.sum()), "B": pc.energy + pl["energy"], "pairs": pc, "plates": pl,
-              "D": 0.0, "fric": [], "fint": fint}
+              "D": 0.0, "fric": [], "fint": fint, "terms": []}
+        for t in self.terms:        # potentials scaled with the pre-strain: booked with the strain energy
+            e, gt, nodes, H = t.evaluate(x, s, hessian)
+            ev["U"] += e
+            g[:self.n, :3] += gt
+            fint = fint + np.pad(gt, ((0, 0), (0, 3)))
+            if hessian:
+                ev["terms"].append((nodes, H))
         for lg in lag:
             if lg is None or not len(lg):
                 continue
@@ -109,6 +116,7 @@ class SystemMixin:
             g[:self.n, :3] += fr.grad
         ev["g_contact"] = g[:, :3].copy()
         ev["g_contact"][:self.n] -= fint[:, :3]
+        ev["fint"] = fint
         g[:self.n] -= self.applied_loads()
         g[self.n:, 2] -= self.plate_force
         ev["g"] = g
@@ -126,6 +134,7 @@ class SystemMixin:
         slots = [self._slots(pc.hess_nodes) if pc.n_active else None]
         fric = ev["fric"]
         slots += [self._friction_slots(lg) for lg, _ in fric]
+        slots += [self._slots(nodes) for nodes, _ in ev.get("terms", ())]
         if self.sys is not sys:
             sys = self.sys
             sys.assemble(self.cor.Ke)
@@ -135,6 +144,8 @@ class SystemMixin:
             sys.add_blocks(pl["blocks"], self.plate_slots[pl["active"]])
         for (lg, fr), sl in zip(fric, slots[1:]):
             sys.add_blocks(fr.hess, sl)
+        for (_, H), sl in zip(ev.get("terms", ()), slots[1 + len(fric):]):
+            sys.add_blocks(H, sl)
         self._hmax = float(np.abs(sys.diagonal()).max(initial=0.0))
 
     def _friction_slots(self, lg):
@@ -159,6 +170,7 @@ class SystemMixin:
         if len(pl["active"]):
             blocks.append((pl["blocks"], self.scene.plate_block_nodes(pl["active"])))
         blocks += [(fr.hess, lg.nodes) for lg, fr in ev["fric"] if len(lg)]
+        blocks += [(H, nodes) for nodes, H in ev.get("terms", ())]
         for H, nodes in blocks:
             v = d3[nodes].reshape(len(nodes), -1)
             hv = np.einsum("rij,rj->ri", H, v).reshape(len(nodes), -1, 3)
@@ -265,7 +277,8 @@ class SystemMixin:
 
     def _prestrain_rate(self) -> float:
         f = self.frame
-        return float(np.sum(self.cor.forces[:, 6] * f.length * f.prestrain))
+        x = self.positions
+        return float(np.sum(self.cor.forces[:, 6] * f.length * f.prestrain)) + sum(t.rate(x) for t in self.terms)
 
     def _account(self, info, snap) -> None:
         ev = info.extra["ev"]
