@@ -62,7 +62,7 @@ def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str | None = N
 
 def _frame_of(obj):
     if isinstance(obj, Frame):
-        return obj, None, {}, None
+        return obj, None, {"validity": {}}, None
     fr = getattr(obj, "frame", None)
     if not isinstance(fr, Frame):
         raise InputError(f"compress needs a homtex.Frame or an object with a .frame (a homtex Cell), "
@@ -70,6 +70,7 @@ def _frame_of(obj):
     groups = getattr(obj, "groups", None)
     info = getattr(obj, "info", None) or {}
     spec = getattr(obj, "friction_spec", None)
+    info = dict(info, validity=getattr(obj, "validity", None) or {})
     return fr, groups, info, spec
 
 
@@ -181,7 +182,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         targets = _targets(pressure, steps, "pressure")
     return run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
                            tol=option("tol", tol), maxiter=maxiter, max_cuts=int(max_cuts),
-                           progress=option("progress", progress), geometry=geometry, friction_spec=friction_spec)
+                           progress=option("progress", progress), geometry=geometry, friction_spec=friction_spec,
+                           validity=info.get("validity"))
 
 
 def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = None, plates=None,

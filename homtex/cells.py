@@ -69,7 +69,8 @@ GENERATORS: dict[str, str] = {
     "spacer": "homtex.geometry.spacer:build_cell",
 }
 
-TABLES = ("cell", "parameters", "yarns", "resolution", "contact")
+TABLES = ("cell", "parameters", "yarns", "resolution", "contact", "validity")
+VALIDITY_KEYS = ("linear_strain_limit", "source")
 CONTACT_KEYS = ("friction", "plate_friction", "pairs")
 #: largest friction coefficient a cell file may give
 MAX_FRICTION = 10.0
@@ -154,6 +155,19 @@ def _resolve(generator: str, file):
                         file=file, table="cell", key="generator") from exc
 
 
+def _validity(d: dict) -> dict:
+    """The ``[validity]`` table: ``linear_strain_limit`` (the compression strain up to which the
+    linear model's stress stays within 10 % of the large-motion engine's, measured by
+    studies/verification/linear_validity.py) and its ``source``."""
+    check_keys(d, VALIDITY_KEYS, "validity")
+    out = {}
+    lim = get_number(d, "linear_strain_limit", "validity", gt=0.0, lt=1.0, required=False)
+    if lim is not None:
+        out["linear_strain_limit"] = lim
+        out["source"] = get_str(d, "source", "validity", default="the cell file's [validity] table")
+    return out
+
+
 # ----------------------------------------------------------------------------------
 class Cell:
     """A validated unit cell: its generator, parameters, yarn types and resolution.
@@ -167,6 +181,8 @@ class Cell:
     frame : Frame, built by the generator on first access and cached
     groups : dict name -> (m,) bool element mask (from the generator, may be empty)
     info : dict of further generator output (e.g. "thickness", mm)
+    validity : dict from the ``[validity]`` table ({"linear_strain_limit": strain, "source": str};
+        empty when the file has none)
     """
 
     def __init__(self, data: dict, path=None):
@@ -178,7 +194,7 @@ class Cell:
             for key in data:
                 if key not in TABLES:
                     raise CellError(f"unknown table [{key}]; a cell file has [cell], [parameters], "
-                                    f"[yarns.<name>], [resolution] and [contact]", table=key)
+                                    f"[yarns.<name>], [resolution], [contact] and [validity]", table=key)
             cell = get_table(data, "cell", "")
             check_keys(cell, CELL_KEYS, "cell")
             self.name = get_str(cell, "name", "cell")
@@ -191,6 +207,7 @@ class Cell:
             self.yarns = {name: _yarn(name, d) for name, d in yarns.items()}
             self.resolution = copy.deepcopy(get_table(data, "resolution", "", required=False))
             self.contact = _contact(get_table(data, "contact", "", required=False), self.yarns)
+            self.validity = _validity(get_table(data, "validity", "", required=False))
         except CellError as err:
             err.file = err.file or f
             raise
