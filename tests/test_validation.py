@@ -156,7 +156,10 @@ except ModuleNotFoundError:  # pragma: no cover
 CELLS = sorted((Path(__file__).resolve().parents[1] / "cells").glob("*.toml"))
 
 BAD_LEAVES = ["a string", True, False, math.nan, math.inf, -math.inf, -1, 0, 0.0, -1e300, 1e300, 10 ** 18,
-              2.5, [], [1, 2, 3], [[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]], {"x": 1}, 10_000, 1e-300]
+              2.5, [], [1, 2, 3], [[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]], {"x": 1}, 10_000, 1e-300,
+              2 ** 70, 10 ** 400, [2 ** 70, 1]]   # beyond int64 and beyond double precision (tomllib reads them)
+#: what replaces a whole table of a cell file (a table where a value belongs is among BAD_LEAVES)
+BAD_TABLES = ["x", 1, 2.5, True, [1, 2], []]
 
 
 def _leaves(d, prefix=()):
@@ -165,6 +168,13 @@ def _leaves(d, prefix=()):
             yield from _leaves(v, prefix + (k,))
         else:
             yield prefix + (k,)
+
+
+def _tables(d, prefix=()):
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield prefix + (k,)
+            yield from _tables(v, prefix + (k,))
 
 
 def _set(d, path, value):
@@ -215,6 +225,25 @@ def test_mutated_cell_files_raise_cell_errors_or_build_finite_frames(path):
                     _frame_is_finite(cell)
                 assert time.perf_counter() - t0 < 10.0, (leaf, value)
     assert outcomes["error"] > 0
+
+
+@pytest.mark.parametrize("path", CELLS, ids=[p.stem for p in CELLS])
+def test_a_value_in_place_of_a_table_is_a_cell_error(path):
+    """Every table of every shipped cell file (nested ones included: [parameters.seam],
+    [parameters.bars.pile], ...) replaced by a string, a number, a boolean or an array: a
+    CellError naming the table and key (``seam = "x"`` raised AttributeError)."""
+    from homtex.cells import Cell
+
+    data = tomllib.loads(path.read_text())
+    for table in _tables(data):
+        for value in BAD_TABLES:
+            d = copy.deepcopy(data)
+            _set(d, table, value)
+            try:
+                Cell(d, path).build()
+            except homtex.CellError as err:
+                assert err.file == str(path)
+                assert table[-1] in str(err), (table, value, str(err))
 
 
 @pytest.mark.parametrize("key", ["gauge", "courses_per_cm", "thickness"])

@@ -551,15 +551,16 @@ def build_cell(parameters: dict, yarns: dict[str, YarnType], resolution: dict) -
     thickness = get_number(p, "thickness", t, gt=0, le=1000)      # mm
     bond = get_number(p, "bond_distance", t, default=0.0, ge=0, le=100)
     bars = get_table(p, "bars", t)
+    seam = get_table(p, "seam", t, required=False)
     for name, spec in bars.items():
         spec = get_table(bars, name, f"{t}.bars")
-        if spec.get("yarn") == (p.get("seam") or {}).get("yarn"):
+        if spec.get("yarn") == seam.get("yarn"):
             raise CellError(f"yarn {spec.get('yarn')!r} is the seam's stitch yarn", table=f"{t}.bars.{name}",
                             key="yarn")
         for key in ("lapping", "yarn", "bed", "threading", "system"):
             if key in spec:
                 get_str(spec, key, f"{t}.bars.{name}")
-    _check_seam_table(get_table(p, "seam", t, required=False), yarns)
+    _check_seam_table(seam, yarns)
     shape = get_table(p, "shape", t, required=False)
     for key in shape:
         get_number(shape, key, f"{t}.shape")
