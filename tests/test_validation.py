@@ -274,6 +274,65 @@ def test_sizes_are_bounded_before_allocation():
     assert time.perf_counter() - t0 < 5.0
 
 
+@pytest.mark.parametrize("key, value, limit", [("pile_segments", 2000, 100), ("elements_per_segment", 51, 50),
+                                               ("pile_segments", 2 ** 70, 100)])
+def test_spacer_resolution_is_bounded_before_building(key, value, limit):
+    """pile_segments = 2000 passed the max_elements check (16 000 elements) and then spent 9 s and
+    2.6 GB in a quadratic overlap search: the resolution keys are bounded up front."""
+    from homtex.cells import Cell
+
+    data = tomllib.loads((Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml").read_text())
+    data["resolution"][key] = value
+    t0 = time.perf_counter()
+    with pytest.raises(homtex.CellError, match=rf"must be <= {limit}") as info:
+        Cell(data).build()
+    assert (info.value.table, info.value.key) == ("resolution", key)
+    assert time.perf_counter() - t0 < 1.0
+    data["resolution"][key] = limit          # the limit itself is allowed
+    data["resolution"]["elements_per_segment" if key == "pile_segments" else "pile_segments"] = 1
+    assert Cell(data).frame.n_elements > 0
+
+
+def test_overlap_search_grows_with_the_elements_not_the_longest_one(monkeypatch):
+    """yarn_overlaps searched element midpoints within the longest element's length: one long
+    element among many short ones made every pair a candidate (quadratic). Its candidates are now
+    the elements within a few contact radii, and it finds what a brute-force search finds."""
+    from scipy.spatial import cKDTree
+
+    from homtex.geometry import curves
+    from homtex.geometry.curves import segment_distances, yarn_overlaps
+
+    n = 2000
+    x = np.linspace(0.0, 10.0, n + 1)
+    chain = np.c_[x, np.zeros(n + 1), np.zeros(n + 1)]
+    far = [[0.0, 5.0, 0.0], [100.0, 5.0, 0.0]]                  # one 100 mm element
+    cross = [[3.0, -1.0, 0.05], [3.0, 1.0, 0.05]]                 # crosses the chain, 0.05 mm above
+    nodes = np.vstack([chain, far, cross])
+    els = np.vstack([np.c_[np.arange(n), np.arange(1, n + 1)], [[n + 1, n + 2]], [[n + 3, n + 4]]])
+    fr = homtex.Frame(nodes, els, radius=0.05, E=1000.0, nu=0.3, yarn=np.r_[np.zeros(n), 1, 2].astype(int))
+    found = []
+
+    class Counting(cKDTree):
+        def sparse_distance_matrix(self, other, r, **kw):
+            out = super().sparse_distance_matrix(other, r, **kw)
+            found.append(out.nnz)
+            return out
+
+    monkeypatch.setattr(curves, "cKDTree", Counting)
+    ov = yarn_overlaps(fr)
+    # the neighbours within a few radii along the chain (about 80 each), not all n^2 = 4e6 pairs
+    assert sum(found) < 0.05 * fr.n_elements ** 2
+    # brute force: every pair of different yarns
+    a, b = np.triu_indices(fr.n_elements, 1)
+    a, b = a[fr.yarn[a] != fr.yarn[b]], b[fr.yarn[a] != fr.yarn[b]]
+    x0, d = fr.nodes[fr.elements[:, 0]], fr.element_vectors
+    dist, _, _ = segment_distances(x0[a], d[a], x0[b], d[b])
+    hit = fr.contact_radius[a] + fr.contact_radius[b] - dist > 1e-9
+    assert sorted(zip(ov["element_a"].tolist(), ov["element_b"].tolist())) == sorted(zip(a[hit].tolist(),
+                                                                                          b[hit].tolist()))
+    assert len(ov) > 0 and set(ov["yarn_a"].tolist()) | set(ov["yarn_b"].tolist()) == {0, 2}
+
+
 def test_deeply_nested_cell_file_is_a_cell_error(tmp_path):
     p = tmp_path / "deep.toml"
     p.write_text('[cell]\nname = "x"\ngenerator = "square"\n[parameters]\na = ' + "[" * 3000 + "1" + "]" * 3000 + "\n")
