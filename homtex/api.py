@@ -12,11 +12,14 @@ from .config import option
 from .contact.compress import CompressionTest, run_compression
 from .contact.options import Contact
 from .contact.solver import solve_contact
-from .errors import InputError
+from .errors import InputError, SolverError
 from .fem.assembly import Assembler
+from .linalg.solvers import SINGULAR
 from .model.arrays import as_real
 from .model.frame import Frame
 from .model.results import StaticResult
+from .model.scene import Scene
+from .model.topology import singular_diagnosis
 from .validate import check_choice, check_int, check_number
 
 __all__ = ["compress", "solve_static"]
@@ -43,16 +46,39 @@ def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str | None = N
 
     Raises
     ------
-    InputError for bad supports/loads; SolverError for unheld parts or a failed solve.
+    InputError for bad supports/loads; SolverError for unheld parts or a failed solve; a singular
+    stiffness matrix (from any solver, AMG's coarse grid included) names the parts nothing holds
+    and the elements of almost no stiffness.
     """
     if not isinstance(frame, Frame):
         raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
-    if contact is not None:
-        return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
-                             maxiter=maxiter, assembler=assembler, **contact_options)
-    if contact_options:
+    if contact_options and contact is None:
         raise InputError(f"unknown options {sorted(contact_options)}")
-    return solve_linear(frame, fixed, loads, solver=solver, tol=tol, maxiter=maxiter, assembler=assembler)
+    try:
+        if contact is not None:
+            return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
+                                 maxiter=maxiter, assembler=assembler, **contact_options)
+        return solve_linear(frame, fixed, loads, solver=solver, tol=tol, maxiter=maxiter, assembler=assembler)
+    except SolverError as err:
+        if not any(w in str(err) for w in (SINGULAR, "singular", "not positive definite")):
+            raise
+        hint = _singular_hint(frame, None if contact is not None else fixed, loads)
+        if not hint:
+            raise
+        raise SolverError(f"{err}\nIn this frame:\n{hint}", history=err.history, report=err.report) from err
+
+
+def _singular_hint(frame, fixed, loads) -> str:
+    """The frame's diagnosis of a singular stiffness matrix (:func:`homtex.model.topology.singular_diagnosis`):
+    unheld parts (without contact: the supports alone must hold every part) and elements of almost
+    no stiffness."""
+    mask = None
+    if fixed is not None:
+        try:
+            mask = Scene.build(frame, fixed, loads).mask
+        except InputError:
+            mask = None
+    return singular_diagnosis(frame, mask)
 
 
 def _frame_of(obj):
