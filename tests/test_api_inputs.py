@@ -9,6 +9,7 @@ import math
 import warnings
 
 import numpy as np
+import pytest
 
 import homtex
 
@@ -87,3 +88,46 @@ def test_every_bad_argument_is_refused_by_name_or_valid():
                         OPTIONS.update(before)
     assert raw == [], "\n".join(map(str, raw))
     assert counts["named"] > 900 and counts["accepted"] < 100, counts
+
+
+# ------------------------------------------------------------------ options changed after construction
+@pytest.mark.parametrize("name, value", [("friction", -5), ("friction", math.nan), ("plate_friction", 11.0),
+                                         ("strategy", "magic"), ("max_iter", 2.5), ("penalty", -1.0),
+                                         ("reuse_amg", 1), ("barrier_gap", 0.9), ("fricton", 0.2)])
+def test_contact_options_are_checked_on_assignment(name, value):
+    """``c = Contact(); c.friction = -5`` ran frictionless with status "ok": every assignment is
+    checked like the constructor's argument (and a misspelt option is refused, not added)."""
+    c = homtex.Contact()
+    before = homtex.Contact()
+    with pytest.raises(homtex.InputError, match=name):
+        setattr(c, name, value)
+    assert c == before                     # nothing changed
+    c.friction = 0.3                       # a valid value is taken, converted like the constructor's
+    assert c.friction == 0.3 and c.has_friction and c == homtex.Contact(friction=0.3)
+
+
+def test_every_contact_option_has_a_check():
+    import dataclasses
+
+    from homtex.contact.options import _CHECKS
+
+    assert set(_CHECKS) == {f.name for f in dataclasses.fields(homtex.Contact)}
+
+
+def test_plate_fields_are_checked_on_assignment():
+    p = homtex.Plate(z=0.0, displacement=1.0)
+    for name, value, match in [("z", math.nan, "Plate.z"), ("normal", 2, "Plate.normal"),
+                               ("force", 5.0, "either 'displacement'"), ("pressure", 3.0, "area"),
+                               ("displacement", math.inf, "Plate.displacement"), ("name", 3, "Plate.name"),
+                               ("heigth", 1.0, "no attribute 'heigth'")]:
+        with pytest.raises(homtex.InputError, match=match):
+            setattr(p, name, value)
+        assert p == homtex.Plate(z=0.0, displacement=1.0), name
+    p.displacement = None                  # switching to force control: one at a time
+    p.force = 5.0
+    assert p.force_controlled and p.force == 5.0
+    q = homtex.Plate(z=0.0, pressure=10.0, area=100.0)
+    q.area = 200.0                         # the force follows pressure x area
+    assert q.force == pytest.approx(2.0)
+    q.force = 1.0                          # a force given directly replaces the pressure
+    assert (q.force, q.pressure, q.area) == (1.0, None, None)
