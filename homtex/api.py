@@ -98,6 +98,9 @@ def _targets(v, steps, name):
     arr = np.atleast_1d(as_real(v, name))
     if arr.ndim != 1 or arr.size > 100_000:
         raise InputError(f"{name} must be a number or a 1-D array of at most 100000 levels, got shape {arr.shape}")
+    if arr.size == 0:
+        raise InputError(f"{name} must be a number or a non-empty array of levels, got an empty array (a curve "
+                         "needs at least one level)")
     if arr.size == 1:
         if not (np.isfinite(arr[0]) and arr[0] > 0):
             raise InputError(f"{name} must be positive, got {v!r}")
@@ -135,6 +138,10 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         else the x-y bounding box of the yarns).
     solver, tol : linear solver and tolerance (default: options ``compress_solver`` ("direct")
         and ``tol``).
+    maxiter : iteration limit, an integer >= 1: with ``geometry="linear"`` of the iterative linear
+        solves (``solver="amg"`` or ``"cg"``; default 1000 and 5000); with ``geometry="nonlinear"``
+        the large-motion engine's Newton iterations per friction round of a step (default 80;
+        :class:`homtex.contact.incremental.NonlinearSettings` ``max_iter``).
     max_cuts : a step whose contact iteration fails (cycling active set, penetration, solver
         failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
         1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
@@ -177,6 +184,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     elif callable(spec) and contact.friction is None:
         friction_spec = spec()
     max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=30)
+    if maxiter is not None:
+        maxiter = check_int(maxiter, "maxiter", ge=1, le=10 ** 6)
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
         raise InputError(f"progress must be True or False, got {progress!r}")
     if thickness is not None:

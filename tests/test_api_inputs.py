@@ -131,3 +131,25 @@ def test_plate_fields_are_checked_on_assignment():
     assert q.force == pytest.approx(2.0)
     q.force = 1.0                          # a force given directly replaces the pressure
     assert (q.force, q.pressure, q.area) == (1.0, None, None)
+
+
+# ------------------------------------------------------------------ compress: maxiter and levels
+def test_nonlinear_compress_checks_and_uses_maxiter():
+    """compress(geometry="nonlinear") ignored maxiter: it is checked (an integer >= 1) and is the
+    engine's Newton iteration limit."""
+    spacer = homtex.load_cell("spacer_20mm")
+    for bad in (0, 2.5, -1, True, "10"):
+        with pytest.raises(homtex.InputError, match="maxiter"):
+            homtex.compress(spacer, strain=0.05, steps=1, geometry="nonlinear", maxiter=bad)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = homtex.compress(spacer, strain=0.05, steps=1, geometry="nonlinear", maxiter=2, max_cuts=0)
+    assert ds.attrs["status"] == "failed" and "did not converge in 2 iterations" in ds.attrs["status_detail"]
+
+
+@pytest.mark.parametrize("kw", [{"strain": []}, {"strain": np.array([])}, {"control": "force", "pressure": []}])
+def test_compress_refuses_empty_levels(kw):
+    """compress(strain=[]) returned an empty curve with status "ok"."""
+    name = "pressure" if "pressure" in kw else "strain"
+    with pytest.raises(homtex.InputError, match=rf"{name} must be a number or a non-empty array"):
+        homtex.compress(homtex.load_cell("square").frame, **kw)

@@ -159,13 +159,19 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
     step that still fails ends the curve: the steps before it are kept, ``attrs["status"]`` is
     "failed" and ``attrs["status_detail"]`` says where and why. ``geometry="nonlinear"``: the
     large-motion engine (:func:`homtex.contact.nl_compress.run_nonlinear_compression`;
-    ``friction_spec``: a cell file's friction table).
+    ``friction_spec``: a cell file's friction table). ``maxiter``: the iteration limit of the
+    iterative linear solves (linear), or the engine's Newton iterations per friction round
+    (nonlinear, :class:`~homtex.contact.incremental.NonlinearSettings` ``max_iter``); None: their
+    defaults.
     """
     if geometry == "nonlinear":
+        from .incremental import NonlinearSettings
         from .nl_compress import run_nonlinear_compression
 
+        settings = None if maxiter is None else NonlinearSettings(max_iter=int(maxiter))
         return run_nonlinear_compression(test, targets, control=control, contact=contact,
-                                         friction_spec=friction_spec, max_cuts=max_cuts, progress=progress)
+                                         friction_spec=friction_spec, max_cuts=max_cuts, progress=progress,
+                                         settings=settings)
     t0 = time.perf_counter()
     cs = test.solver(contact, solver=solver, tol=tol, maxiter=maxiter)
     names = list(test.groups)
