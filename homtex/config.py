@@ -34,6 +34,7 @@ name                         default      meaning
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any, Callable
 
 from .errors import InputError
@@ -44,20 +45,35 @@ SOLVERS = ("amg", "direct", "cg")
 NONLINEAR_SOLVERS = ("auto", "ldl", "lu", "direct")
 
 
-def _solver(v) -> bool:
-    return v in SOLVERS
+def _choice(choices) -> Callable[[Any], bool]:
+    """A validator accepting a string among ``choices`` (a numpy array, list or other object is
+    refused by type before it is compared, so ``v in choices`` never meets an array)."""
+    return lambda v: isinstance(v, str) and v in choices
+
+
+_solver = _choice(SOLVERS)
+
+
+def _real(v) -> bool:
+    """A real number (Python or numpy; not a boolean)."""
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and type(v).__name__ != "bool_"
+
+
+def _integer(v) -> bool:
+    """An integer (Python or numpy; not a boolean)."""
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool) and type(v).__name__ != "bool_"
 
 
 def _tol(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0.0 < v < 1.0
+    return _real(v) and math.isfinite(v) and 0.0 < v < 1.0
 
 
 def _penalty(v) -> bool:
-    return v is None or (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0)
+    return v is None or (_real(v) and math.isfinite(v) and v > 0)
 
 
 def _threads(v) -> bool:
-    return v is None or (isinstance(v, int) and not isinstance(v, bool) and v >= 1)
+    return v is None or (_integer(v) and v >= 1)
 
 
 def _bool(v) -> bool:
@@ -81,13 +97,13 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "static_solver": (_solver, f"one of {SOLVERS}"),
     "homogenize_solver": (_solver, f"one of {SOLVERS}"),
     "compress_solver": (_solver, f"one of {SOLVERS}"),
-    "nonlinear_solver": (lambda v: v in NONLINEAR_SOLVERS, f"one of {NONLINEAR_SOLVERS}"),
+    "nonlinear_solver": (_choice(NONLINEAR_SOLVERS), f"one of {NONLINEAR_SOLVERS}"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),
     "threads": (_threads, "None or an integer >= 1"),
     "progress": (_bool, "True or False"),
-    "max_elements": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
+    "max_elements": (lambda v: _integer(v) and v >= 1, "an integer >= 1"),
 }
 
 #: the current options (read with :func:`option`; change with :func:`set_options`)
@@ -123,10 +139,10 @@ class set_options:
                 raise InputError(f"set_options: unknown option {name!r}; options are {sorted(_VALIDATORS)}")
             ok, what = _VALIDATORS[name]
             if not ok(value):
-                raise InputError(f"set_options: option {name!r} must be {what}, got {value!r}")
+                raise InputError(f"set_options: option {name!r} must be {what}, got {_short(value)}")
         for name, value in kwargs.items():
             self.old[name] = OPTIONS[name]
-            OPTIONS[name] = value
+            OPTIONS[name] = _plain(value)
             if name == "threads":
                 _apply_threads(value)
 
@@ -154,5 +170,23 @@ def option(name: str, value=None):
     ok, what = _VALIDATORS[name]
     if not ok(value):
         arg = "solver" if name.endswith("_solver") else name
-        raise InputError(f"{arg} must be {what}, got {value!r}")
-    return value
+        raise InputError(f"{arg} must be {what}, got {_short(value)}")
+    return _plain(value)
+
+
+def _plain(v):
+    """A validated value as a plain Python object (``np.str_("amg")`` -> ``"amg"``, numpy numbers
+    -> int / float)."""
+    if isinstance(v, str):
+        return str(v)
+    if isinstance(v, numbers.Integral):
+        return int(v)
+    if isinstance(v, numbers.Real):
+        return float(v)
+    return v
+
+
+def _short(v, n: int = 80) -> str:
+    """repr(v) cut to about n characters (a large array in a message)."""
+    r = repr(v)
+    return r if len(r) <= n else f"{r[:n - 20]}...({len(r)} characters)"

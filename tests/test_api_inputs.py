@@ -153,3 +153,42 @@ def test_compress_refuses_empty_levels(kw):
     name = "pressure" if "pressure" in kw else "strain"
     with pytest.raises(homtex.InputError, match=rf"{name} must be a number or a non-empty array"):
         homtex.compress(homtex.load_cell("square").frame, **kw)
+
+
+# ------------------------------------------------------------------ arrays for string options
+ARRAYS = [np.array([1, 2]), np.array(["amg", "direct"]), np.array(["amg"]), np.array("amg"), ["amg"]]
+
+
+@pytest.mark.parametrize("value", ARRAYS, ids=repr)
+@pytest.mark.parametrize("name", ["static_solver", "homogenize_solver", "compress_solver", "nonlinear_solver"])
+def test_string_options_refuse_arrays_by_name(name, value):
+    """``set_options(static_solver=np.array([1, 2]))`` raised a raw ValueError (``v in SOLVERS``
+    on an array); a one-element array was accepted and stored."""
+    from homtex.config import OPTIONS
+
+    before = dict(OPTIONS)
+    with pytest.raises(homtex.InputError, match=name):
+        homtex.set_options(**{name: value})
+    assert OPTIONS == before
+    with homtex.set_options(**{name: np.str_(before[name])}):   # a numpy string is a string
+        assert type(homtex.get_options()[name]) is str
+
+
+@pytest.mark.parametrize("value", ARRAYS, ids=repr)
+def test_choice_arguments_refuse_arrays_by_name(value):
+    from homtex.validate import check_choice
+
+    nodes = np.c_[np.linspace(0, 10, 5), np.zeros(5), np.zeros(5)]
+    fr = homtex.Frame(nodes, np.c_[np.arange(4), np.arange(1, 5)], radius=0.5, E=1000.0, nu=0.3)
+    sq = homtex.load_cell("square").frame
+    with pytest.raises(homtex.InputError, match="solver"):
+        check_choice(value, "solver", ("amg", "direct", "cg"))
+    with pytest.raises(homtex.InputError, match="solver"):
+        homtex.solve_static(fr, {0: "all"}, {4: (0, 0, -1, 0, 0, 0)}, solver=value)
+    with pytest.raises(homtex.InputError, match="solver"):
+        homtex.homogenize(sq, solver=value)
+    for arg in ("solver", "control", "geometry"):
+        with pytest.raises(homtex.InputError, match=arg):
+            homtex.compress(sq, strain=0.1, **{arg: value})
+    with pytest.raises(homtex.InputError, match="method"):
+        homtex.Lookup.from_grid({"a": np.arange(3.0)}, np.arange(3.0), method=value)
