@@ -8,7 +8,7 @@ import numpy as np
 import xarray as xr
 
 from .analysis.static import solve_linear
-from .config import option
+from .config import option, threads_for
 from .contact.compress import CompressionTest, run_compression
 from .contact.options import Contact
 from .contact.solver import solve_contact
@@ -55,10 +55,11 @@ def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str | None = N
     if contact_options and contact is None:
         raise InputError(f"unknown options {sorted(contact_options)}")
     try:
-        if contact is not None:
-            return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
-                                 maxiter=maxiter, assembler=assembler, **contact_options)
-        return solve_linear(frame, fixed, loads, solver=solver, tol=tol, maxiter=maxiter, assembler=assembler)
+        with threads_for(frame.ndof):     # one numba thread for a small frame (homtex.config)
+            if contact is not None:
+                return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
+                                     maxiter=maxiter, assembler=assembler, **contact_options)
+            return solve_linear(frame, fixed, loads, solver=solver, tol=tol, maxiter=maxiter, assembler=assembler)
     except SolverError as err:
         if not any(w in str(err) for w in (SINGULAR, "singular", "not positive definite")):
             raise

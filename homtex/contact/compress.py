@@ -20,6 +20,7 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.stepping import StepFailure, flag_force_drops, march
+from ..config import threads_for
 from ..errors import InputError
 from ..model.frame import Frame
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
@@ -164,14 +165,21 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
     (nonlinear, :class:`~homtex.contact.incremental.NonlinearSettings` ``max_iter``); None: their
     defaults.
     """
-    if geometry == "nonlinear":
-        from .incremental import NonlinearSettings
-        from .nl_compress import run_nonlinear_compression
+    with threads_for(test.frame.ndof):     # one numba thread for a small cell (homtex.config)
+        if geometry == "nonlinear":
+            from .incremental import NonlinearSettings
+            from .nl_compress import run_nonlinear_compression
 
-        settings = None if maxiter is None else NonlinearSettings(max_iter=int(maxiter))
-        return run_nonlinear_compression(test, targets, control=control, contact=contact,
-                                         friction_spec=friction_spec, max_cuts=max_cuts, progress=progress,
-                                         settings=settings)
+            settings = None if maxiter is None else NonlinearSettings(max_iter=int(maxiter))
+            return run_nonlinear_compression(test, targets, control=control, contact=contact,
+                                             friction_spec=friction_spec, max_cuts=max_cuts, progress=progress,
+                                             settings=settings)
+        return _linear_curve(test, targets, control=control, contact=contact, solver=solver, tol=tol,
+                             maxiter=maxiter, max_cuts=max_cuts, progress=progress, geometry=geometry)
+
+
+def _linear_curve(test, targets, *, control, contact, solver, tol, maxiter, max_cuts, progress, geometry):
+    """The linear model's curve (see :func:`run_compression`)."""
     t0 = time.perf_counter()
     cs = test.solver(contact, solver=solver, tol=tol, maxiter=maxiter)
     names = list(test.groups)
