@@ -48,7 +48,7 @@ import numpy as np
 from .errors import CellError, InputError
 from .model.frame import Frame
 from .model.sections import DEFAULT_STRAIN_LIMIT, YarnType
-from .validate import check_keys, get_list, get_number, get_str, get_table, type_name
+from .validate import check_keys, get_list, get_number, get_str, get_table, read_data_file, type_name
 
 try:
     import tomllib
@@ -434,18 +434,18 @@ def load_cell(path: str | Path, *, build: bool = True) -> Cell:
 
     Raises
     ------
-    CellError (an InputError) naming the file, table and key of the culprit.
+    CellError (an InputError) naming the file, table and key of the culprit; also for a path that
+    is not a regular file (a device such as ``/dev/zero``, a pipe) or a file over 10 MB
+    (:data:`homtex.validate.MAX_FILE_BYTES`), refused before it is read.
     """
     if not isinstance(build, (bool, np.bool_)):
         raise CellError(f"build must be True or False, got {build!r}")
     p = find_cell(path)
     try:
-        text = p.read_bytes().decode("utf-8")
+        text = read_data_file(p, error=CellError, what="a cell file (.toml)")
     except FileNotFoundError:
         raise CellError(f"no such file, and no shipped cell of that name (shipped cells: {', '.join(shipped_cells())})",
                         file=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CellError(f"cannot read: {exc}", file=path) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -406,6 +406,15 @@ def test_force_drops_are_flagged_with_where_and_how_much():
     wiggle[6] = 11.9                                   # 0.8 % below the force reached: below the threshold
     ds = flag_force_drops(curve(wiggle))
     assert 0 < ds.attrs["force_drop_max"] < 0.02 and "check" not in ds.attrs
+    # each model names its own artefact: the linear model its re-linearised contact, the large-motion
+    # engine a buckling of the yarns or a step too large for its step control
+    with pytest.warns(UserWarning, match="re-linearised contact"):
+        flag_force_drops(curve(snap), model="linear")
+    with pytest.warns(UserWarning, match="buckling of the yarns") as rec:
+        flag_force_drops(curve(snap), model="nonlinear")
+    assert "re-linearised" not in str(rec[0].message)
+    with pytest.raises(homtex.InputError, match="model"):
+        flag_force_drops(curve(snap), model="magic")
 
 
 def test_an_iterative_solver_too_coarse_for_the_gap_tolerance_says_so():

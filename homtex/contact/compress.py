@@ -20,6 +20,7 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.stepping import StepFailure, flag_force_drops, march
+from ..config import threads_for
 from ..errors import InputError
 from ..model.frame import Frame
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
@@ -156,8 +157,7 @@ MAX_LINEAR_ROTATION = 0.1
 
 def run_compression(test: CompressionTest, targets, *, control: str, contact: Contact, solver: str, tol: float,
                     maxiter=None, max_cuts: int = 4, progress: bool = False, geometry: str = "linear",
-                    friction_spec: dict | None = None, validity: dict | None = None,
-                    settings=None) -> xr.Dataset:
+                    friction_spec: dict | None = None, validity: dict | None = None) -> xr.Dataset:
     """The compression curve of ``test`` through the load levels ``targets`` (strains or kPa).
 
     ``geometry="linear"``: linear beams, contact re-linearised per step. A failing step is halved
@@ -165,17 +165,30 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
     step that still fails ends the curve: the steps before it are kept, ``attrs["status"]`` is
     "failed" and ``attrs["status_detail"]`` says where and why. ``geometry="nonlinear"``: the
     large-motion engine (:func:`homtex.contact.nl_compress.run_nonlinear_compression`;
-    ``friction_spec``: a cell file's friction table; ``settings``: its NonlinearSettings).
-    ``validity``: the cell file's ``[validity]`` table; a linear curve that goes beyond its
+    ``friction_spec``: a cell file's friction table). ``maxiter``: the iteration limit of the
+    iterative linear solves (linear), or the engine's Newton iterations per friction round
+    (nonlinear, :class:`~homtex.contact.incremental.NonlinearSettings` ``max_iter``); None: their
+    defaults. ``validity``: the cell file's ``[validity]`` table; a linear curve that goes beyond its
     ``linear_strain_limit`` (measured), or whose nodes turn by more than ``MAX_LINEAR_ROTATION``, is
     "flagged" (complete, but outside the linear model's range).
     """
-    if geometry == "nonlinear":
-        from .nl_compress import run_nonlinear_compression
+    with threads_for(test.frame.ndof):     # one numba thread for a small cell (homtex.config)
+        if geometry == "nonlinear":
+            from .incremental import NonlinearSettings
+            from .nl_compress import run_nonlinear_compression
 
-        return run_nonlinear_compression(test, targets, control=control, contact=contact,
-                                         friction_spec=friction_spec, max_cuts=max_cuts, progress=progress,
-                                         settings=settings)
+            settings = None if maxiter is None else NonlinearSettings(max_iter=int(maxiter))
+            return run_nonlinear_compression(test, targets, control=control, contact=contact,
+                                             friction_spec=friction_spec, max_cuts=max_cuts, progress=progress,
+                                             settings=settings)
+        return _linear_curve(test, targets, control=control, contact=contact, solver=solver, tol=tol,
+                             maxiter=maxiter, max_cuts=max_cuts, progress=progress, geometry=geometry,
+                             validity=validity)
+
+
+def _linear_curve(test, targets, *, control, contact, solver, tol, maxiter, max_cuts, progress, geometry,
+                  validity):
+    """The linear model's curve (see :func:`run_compression`)."""
     t0 = time.perf_counter()
     cs = test.solver(contact, solver=solver, tol=tol, maxiter=maxiter)
     names = list(test.groups)

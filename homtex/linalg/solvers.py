@@ -171,6 +171,13 @@ class ScaledAMG:
             As, B=Bs, symmetry="symmetric", strength=("symmetric", {"theta": 0.0}),
             presmoother=cheb, postsmoother=cheb, improve_candidates=None,
             max_coarse=max(1, int(max_coarse) // bs), coarse_solver="splu")
+        # pyamg factorises the coarse grid lazily, inside the first V-cycle, where a singular
+        # operator escaped as a bare RuntimeError ("Factor is exactly singular"): factorise it now
+        Ac = self.ml.levels[-1].A
+        try:
+            self.ml.coarse_solver(Ac, np.zeros(Ac.shape[0]))
+        except RuntimeError as err:
+            raise singular_error("amg", err, coarse=True) from err
         self.shape = A.shape
         self.degree = degree  # Chebyshev degree (homtex.krylov rebuilds the smoother from it)
 
@@ -249,9 +256,7 @@ class LinearSolver:
                         self.factor = splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A",
                                            diag_pivot_thresh=0.0, options={"SymmetricMode": True})
                     except RuntimeError as err:   # "Factor is exactly singular"
-                        raise SolverError(f"SuperLU factorisation failed ({err}): the matrix is singular - a "
-                                          "part of the structure that nothing holds, or an element of zero "
-                                          "stiffness") from err
+                        raise singular_error("direct (superlu)", err) from err
                     self.backend = "superlu"
         self.setup_seconds = time.perf_counter() - t0
 
@@ -284,7 +289,12 @@ class LinearSolver:
                 xs = self.factor(bs) if self.backend == "cholmod" else self.factor.solve(bs)
                 rep.method = f"direct ({self.backend})"
             else:
-                xs = self._iterate(bs, None if x0 is None else np.asarray(x0, dtype=float) / scale, nb, rep)
+                try:
+                    xs = self._iterate(bs, None if x0 is None else np.asarray(x0, dtype=float) / scale, nb, rep)
+                except RuntimeError as err:   # a factorisation inside the preconditioner (a foreign hierarchy)
+                    if isinstance(err, SolverError):
+                        raise
+                    raise singular_error(self.method, err, coarse=self.method == "amg") from err
         rep.solve_seconds = time.perf_counter() - t0
         if not np.all(np.isfinite(xs)):
             raise SolverError(f"{rep.method} solve produced non-finite values "
@@ -333,6 +343,20 @@ class LinearSolver:
         with blas_single_thread():
             dx = self.factor(r) if self.backend == "cholmod" else self.factor.solve(r)
         return x + dx, float(np.linalg.norm(dx) / max(np.linalg.norm(x), 1e-300))
+
+
+#: the words every singular-matrix SolverError contains (callers that know the frame add a diagnosis)
+SINGULAR = "the stiffness matrix is singular"
+
+
+def singular_error(method: str, err: BaseException, *, coarse: bool = False) -> SolverError:
+    """The SolverError for a factorisation that found the matrix singular (``err``: SuperLU's
+    "Factor is exactly singular", also from pyamg's coarse grid), with the usual causes and the
+    remedy. ``solve_static`` adds which parts and elements of the frame are to blame."""
+    where = "the AMG coarse-grid factorisation" if coarse else f"the {method} factorisation"
+    return SolverError(f"{where} failed ({err}): {SINGULAR} - a part of the structure that nothing holds "
+                       "(add supports), or an element of (almost) zero stiffness: E, radius or length orders of "
+                       "magnitude below the others (fix the element's properties or remove it)")
 
 
 def convergence_error(rep: SolveReport, tol: float, label: str) -> SolverError:
