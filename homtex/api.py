@@ -97,7 +97,10 @@ def _frame_of(obj):
     groups = getattr(obj, "groups", None)
     info = getattr(obj, "info", None) or {}
     spec = getattr(obj, "friction_spec", None)
-    info = dict(info, validity=getattr(obj, "validity", None) or {})
+    validity = dict(getattr(obj, "validity", None) or {})
+    if validity.get("mesh_cell") and hasattr(obj, "fabric_fingerprint"):
+        validity["mesh_matches"] = obj.fabric_fingerprint() == validity["mesh_cell"]
+    info = dict(info, validity=validity)
     return fr, groups, info, spec
 
 
@@ -216,10 +219,16 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         if strain is not None:
             raise InputError("compress: 'strain' is for control='displacement'; force control takes 'pressure'")
         targets = _targets(pressure, steps, "pressure")
-    return run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
+    ds = run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
                            tol=option("tol", tol), maxiter=maxiter, max_cuts=int(max_cuts),
                            progress=option("progress", progress), geometry=geometry, friction_spec=friction_spec,
                            validity=info.get("validity"))
+    v = info.get("validity") or {}
+    ds.attrs["mesh_convergence"] = (
+        v["mesh_convergence"] if v.get("mesh_matches") else
+        "not shown for this cell: its resolution or fabric differs from the one the cell file's mesh convergence "
+        "was shown on" if v.get("mesh_cell") else "not shown for this cell (no [validity] mesh_convergence)")
+    return ds
 
 
 def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = None, plates=None,

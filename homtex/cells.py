@@ -70,7 +70,7 @@ GENERATORS: dict[str, str] = {
 }
 
 TABLES = ("cell", "parameters", "yarns", "resolution", "contact", "validity")
-VALIDITY_KEYS = ("linear_strain_limit", "source")
+VALIDITY_KEYS = ("linear_strain_limit", "source", "mesh_convergence", "mesh_cell")
 CONTACT_KEYS = ("friction", "plate_friction", "pairs")
 #: largest friction coefficient a cell file may give
 MAX_FRICTION = 10.0
@@ -158,13 +158,19 @@ def _resolve(generator: str, file):
 def _validity(d: dict) -> dict:
     """The ``[validity]`` table: ``linear_strain_limit`` (the compression strain up to which the
     linear model's stress stays within 10 % of the large-motion engine's, measured by
-    studies/verification/linear_validity.py) and its ``source``."""
+    studies/verification/linear_validity.py) and its ``source``; ``mesh_convergence`` (what a
+    convergence study showed for the cell's resolution) and ``mesh_cell`` (the fabric fingerprint of
+    the cell it was shown on: another resolution or fabric is not covered by it)."""
     check_keys(d, VALIDITY_KEYS, "validity")
     out = {}
     lim = get_number(d, "linear_strain_limit", "validity", gt=0.0, lt=1.0, required=False)
     if lim is not None:
         out["linear_strain_limit"] = lim
         out["source"] = get_str(d, "source", "validity", default="the cell file's [validity] table")
+    conv = get_str(d, "mesh_convergence", "validity", default="")
+    if conv:
+        out["mesh_convergence"] = conv
+        out["mesh_cell"] = get_str(d, "mesh_cell", "validity")
     return out
 
 
@@ -181,8 +187,8 @@ class Cell:
     frame : Frame, built by the generator on first access and cached
     groups : dict name -> (m,) bool element mask (from the generator, may be empty)
     info : dict of further generator output (e.g. "thickness", mm)
-    validity : dict from the ``[validity]`` table ({"linear_strain_limit": strain, "source": str};
-        empty when the file has none)
+    validity : dict from the ``[validity]`` table ({"linear_strain_limit": strain, "source": str,
+        "mesh_convergence": str, "mesh_cell": fingerprint}; empty when the file has none)
     """
 
     def __init__(self, data: dict, path=None):
@@ -312,6 +318,7 @@ class Cell:
         data.pop("cell", None)
         data.get("parameters", {}).pop("seam", None)
         data.pop("contact", None)             # friction is not what a layer rigidity was calibrated on
+        data.pop("validity", None)            # what was measured on the fabric is not part of it
         for y in data.get("yarns", {}).values():
             if isinstance(y, dict):
                 y.pop("source", None)
