@@ -18,6 +18,12 @@ name                         default      meaning
                                           small, often ill-conditioned contact systems
 ``nonlinear_solver``         ``"auto"``   ``solve_nonlinear``: "auto" (LU where moments act on free rotations,
                                           else LDL^T), "ldl", "lu" ("direct" = "ldl")
+``amg_setup``                ``"fast"``   AMG hierarchy setup: "fast" (Lanczos spectral bounds on the numba
+                                          products) or "pyamg" (pyamg's own, restarted Arnoldi bounds)
+``amg_cycle``                ``"numba"``  AMG-CG phase: "numba" (V-cycle applied directly, fused parallel
+                                          kernels) or "pyamg" (pyamg's preconditioner, scipy products)
+``amg_precision``            ``"float64"`` values of the AMG level matrices in the V-cycle: "float64" or
+                                          "float32" (half the bytes; CG stays in float64)
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
 ``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
                                           diagonal of the frame stiffness (about EA / L)
@@ -42,6 +48,9 @@ __all__ = ["OPTIONS", "get_options", "option", "set_options"]
 
 SOLVERS = ("amg", "direct", "cg")
 NONLINEAR_SOLVERS = ("auto", "ldl", "lu", "direct")
+AMG_SETUPS = ("fast", "pyamg")
+AMG_CYCLES = ("numba", "pyamg")
+AMG_PRECISIONS = ("float64", "float32")
 
 
 def _solver(v) -> bool:
@@ -69,6 +78,9 @@ _DEFAULTS: dict[str, Any] = {
     "homogenize_solver": "amg",
     "compress_solver": "direct",
     "nonlinear_solver": "auto",
+    "amg_setup": "fast",
+    "amg_cycle": "numba",
+    "amg_precision": "float64",
     "tol": 1e-10,
     "contact_penalty": None,
     "modulus_penalty": 5000.0,
@@ -82,6 +94,9 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "homogenize_solver": (_solver, f"one of {SOLVERS}"),
     "compress_solver": (_solver, f"one of {SOLVERS}"),
     "nonlinear_solver": (lambda v: v in NONLINEAR_SOLVERS, f"one of {NONLINEAR_SOLVERS}"),
+    "amg_setup": (lambda v: v in AMG_SETUPS, f"one of {AMG_SETUPS}"),
+    "amg_cycle": (lambda v: v in AMG_CYCLES, f"one of {AMG_CYCLES}"),
+    "amg_precision": (lambda v: v in AMG_PRECISIONS, f"one of {AMG_PRECISIONS}"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),

@@ -145,8 +145,10 @@ class ScaledAMG:
     Used as a preconditioner for CG on the unscaled A, so residuals stay in physical units.
     """
 
-    def __init__(self, A, B, *, max_coarse: int = 3000, degree: int = 3):
-        """max_coarse: largest coarse grid in unknowns (solved directly); degree: Chebyshev."""
+    def __init__(self, A, B, *, max_coarse: int = 3000, degree: int = 3, setup: str | None = None):
+        """max_coarse: largest coarse grid in unknowns (solved directly); degree: Chebyshev;
+        setup: "fast" (:func:`homtex.linalg.parallel_amg.sa_levels`: the same smoothed aggregation
+        with Lanczos spectral bounds on numba products) or "pyamg" (default: option ``amg_setup``)."""
         import pyamg
 
         d = np.asarray(A.diagonal(), dtype=float)
@@ -167,10 +169,18 @@ class ScaledAMG:
         # solve, V-cycles 1.8x slower). 3000 unknowns kept the iteration counts of a slender
         # tower (31) and a BCC block (368) that 1000 raised to 143 and 426.
         bs = A.blocksize[0] if isinstance(As, sp.bsr_matrix) else 1
-        self.ml = pyamg.smoothed_aggregation_solver(
-            As, B=Bs, symmetry="symmetric", strength=("symmetric", {"theta": 0.0}),
-            presmoother=cheb, postsmoother=cheb, improve_candidates=None,
-            max_coarse=max(1, int(max_coarse) // bs), coarse_solver="splu")
+        self.setup = option("amg_setup", setup)
+        if self.setup == "fast" and isinstance(As, sp.bsr_matrix):
+            from .parallel_amg import sa_levels
+
+            self.ml = sa_levels(As, Bs if Bs is not None else np.ones((As.shape[0], 1)),
+                                max_coarse=max_coarse, degree=degree)
+        else:
+            self.setup = "pyamg"
+            self.ml = pyamg.smoothed_aggregation_solver(
+                As, B=Bs, symmetry="symmetric", strength=("symmetric", {"theta": 0.0}),
+                presmoother=cheb, postsmoother=cheb, improve_candidates=None,
+                max_coarse=max(1, int(max_coarse) // bs), coarse_solver="splu")
         self.shape = A.shape
         self.degree = degree  # Chebyshev degree (homtex.krylov rebuilds the smoother from it)
 
@@ -191,9 +201,9 @@ class ScaledAMG:
         return spla.LinearOperator(self.shape, matvec=apply, dtype=float)
 
 
-def amg_hierarchy(A, B, *, max_coarse: int = 3000, degree: int = 3) -> ScaledAMG:
+def amg_hierarchy(A, B, *, max_coarse: int = 3000, degree: int = 3, setup: str | None = None) -> ScaledAMG:
     """pyamg smoothed aggregation tuned for beam frames (see :class:`ScaledAMG`)."""
-    return ScaledAMG(A, B, max_coarse=max_coarse, degree=degree)
+    return ScaledAMG(A, B, max_coarse=max_coarse, degree=degree, setup=setup)
 
 
 class LinearSolver:
@@ -206,10 +216,15 @@ class LinearSolver:
     B : (ndof, 6) near-null space for AMG (rigid-body modes)
     tol : relative residual ||b - A x|| / ||b|| to reach
     maxiter : CG iteration limit (default 1000 for amg, 5000 for cg)
+    hierarchy : a :class:`ScaledAMG` to reuse (built for a nearby operator; CG runs on A)
+    cycle : "numba" (the V-cycle applied directly with parallel numba kernels,
+        :mod:`homtex.linalg.parallel_amg`) or "pyamg" (default: option ``amg_cycle``)
+    precision : "float64" or "float32" level matrices in the numba V-cycle (option ``amg_precision``)
     """
 
     def __init__(self, A, *, method: str = "amg", B=None, tol: float | None = None,
-                 maxiter: int | None = None, hierarchy=None):
+                 maxiter: int | None = None, hierarchy=None, cycle: str | None = None,
+                 precision: str | None = None):
         if method not in METHODS:
             raise InputError(f"solver must be one of {METHODS}, got {method!r}")
         self.A = A
@@ -229,6 +244,12 @@ class LinearSolver:
                 self.ml = hierarchy if hierarchy is not None else amg_hierarchy(A, B)
                 self.M = self.ml.aspreconditioner(cycle="V")
                 self.operator_complexity = float(self.ml.operator_complexity())
+                self.cycle = option("amg_cycle", cycle)
+                if self.cycle == "numba":
+                    from .parallel_amg import BSROperator, VCycle
+
+                    self.vcycle = VCycle(self.ml, precision=option("amg_precision", precision))
+                    self.Aop = BSROperator(A if isinstance(A, sp.bsr_matrix) else sp.csr_matrix(A))
             elif method == "cg":
                 d = A.diagonal()
                 inv = 1.0 / d
@@ -309,13 +330,21 @@ class LinearSolver:
     def _iterate(self, bs, x0, nb, rep):
         """Preconditioned CG on the scaled right-hand side, restarted from the current x (at most
         twice) while the true residual misses both criteria although the recurrence met them."""
-        xs, hist = pcg(self.A, bs, self.M, x0=x0, tol=self.tol, maxiter=self.maxiter)
+        if getattr(self, "cycle", None) == "numba":
+            from .parallel_amg import pcg as fast_pcg
+
+            def run(x_start, maxiter):
+                return fast_pcg(self.Aop, bs, self.vcycle, x0=x_start, tol=self.tol, maxiter=maxiter)
+        else:
+            def run(x_start, maxiter):
+                return pcg(self.A, bs, self.M, x0=x_start, tol=self.tol, maxiter=maxiter)
+        xs, hist = run(x0, self.maxiter)
         for _ in range(2):
             nr = float(np.linalg.norm(bs - self.A @ xs))
             eta = nr / (self.anorm * float(np.linalg.norm(xs)) + nb)
             if nr / nb <= self.tol or eta <= self.tol or len(hist) - 1 >= self.maxiter:
                 break
-            xs, more = pcg(self.A, bs, self.M, x0=xs, tol=self.tol, maxiter=self.maxiter - len(hist) + 1)
+            xs, more = run(xs, self.maxiter - len(hist) + 1)
             hist += more
         rep.history = hist
         rep.iterations = len(hist) - 1
