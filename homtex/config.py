@@ -21,9 +21,16 @@ name                         default      meaning
 ``amg_setup``                ``"fast"``   AMG hierarchy setup: "fast" (Lanczos spectral bounds on the numba
                                           products) or "pyamg" (pyamg's own, restarted Arnoldi bounds)
 ``amg_cycle``                ``"numba"``  AMG-CG phase: "numba" (V-cycle applied directly, fused parallel
-                                          kernels) or "pyamg" (pyamg's preconditioner, scipy products)
+                                          kernels), "pyamg" (pyamg's preconditioner, scipy products) or
+                                          "gpu" (hierarchy and CG on a CUDA device; the ``gpu`` extra)
 ``amg_precision``            ``"float64"`` values of the AMG level matrices in the V-cycle: "float64" or
                                           "float32" (half the bytes; CG stays in float64)
+``tangent_solver``           ``"ldl"``    tangent solves of ``solve_nonlinear`` and the large-motion engine:
+                                          "ldl" (qdldl LDL^T, inertia counted), "cholmod" (supernodal
+                                          Cholesky, scikit-sparse), "amg" (AMG-PCG on the PD PTC-shifted
+                                          tangent, reused hierarchy), "auto" (rule: ``tangent_auto_dof``)
+``tangent_auto_dof``         ``100000``   "auto": "ldl" below this many free DOFs, else "cholmod" where
+                                          scikit-sparse imports, else "amg"
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
 ``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
                                           diagonal of the frame stiffness (about EA / L)
@@ -49,7 +56,8 @@ __all__ = ["OPTIONS", "get_options", "option", "set_options"]
 SOLVERS = ("amg", "direct", "cg")
 NONLINEAR_SOLVERS = ("auto", "ldl", "lu", "direct")
 AMG_SETUPS = ("fast", "pyamg")
-AMG_CYCLES = ("numba", "pyamg")
+TANGENT_SOLVERS = ("ldl", "cholmod", "amg", "auto")
+AMG_CYCLES = ("numba", "pyamg", "gpu")
 AMG_PRECISIONS = ("float64", "float32")
 
 
@@ -81,6 +89,8 @@ _DEFAULTS: dict[str, Any] = {
     "amg_setup": "fast",
     "amg_cycle": "numba",
     "amg_precision": "float64",
+    "tangent_solver": "ldl",
+    "tangent_auto_dof": 100_000,
     "tol": 1e-10,
     "contact_penalty": None,
     "modulus_penalty": 5000.0,
@@ -97,6 +107,8 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "amg_setup": (lambda v: v in AMG_SETUPS, f"one of {AMG_SETUPS}"),
     "amg_cycle": (lambda v: v in AMG_CYCLES, f"one of {AMG_CYCLES}"),
     "amg_precision": (lambda v: v in AMG_PRECISIONS, f"one of {AMG_PRECISIONS}"),
+    "tangent_solver": (lambda v: v in TANGENT_SOLVERS, f"one of {TANGENT_SOLVERS}"),
+    "tangent_auto_dof": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),

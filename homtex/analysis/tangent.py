@@ -100,8 +100,9 @@ class FreeSystem:
         (rigid plates of a contact solve, say) carry no elements and couple only through
         ``couplings``.
     method : "ldl" (qdldl on the symmetric part; default) or "lu" (SuperLU on the full tangent).
-    tangent_solver : the :mod:`homtex.linalg.tangent_solver` method of the symmetric tangent
-        (default "ldl"; with method "lu" it only gives the inertia). A name, or a
+    tangent_solver : the :mod:`homtex.linalg.tangent_solver` method of the symmetric tangent:
+        "ldl", "cholmod", "amg" or "auto" (default: option ``tangent_solver``, "ldl"; with method
+        "lu" it only gives the inertia), or a
         :class:`~homtex.linalg.tangent_solver.TangentSolver` instance (not shared between systems).
     couplings : (p, 2) node pairs whose translational 3 x 3 blocks belong to the pattern too
         (contact between yarns, or a yarn and a plate): :meth:`block_slots` maps blocks over
@@ -114,7 +115,7 @@ class FreeSystem:
     of the last LDL^T (None when only an LU factor exists).
     """
 
-    def __init__(self, frame, mask: np.ndarray, method: str = "ldl", *, couplings=None, tangent_solver="ldl"):
+    def __init__(self, frame, mask: np.ndarray, method: str = "ldl", *, couplings=None, tangent_solver=None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}")
         self.method = method
@@ -135,8 +136,8 @@ class FreeSystem:
             fp, fi, self.full_map, _ = _slots(frame, fidx, upper=False)
             self.F = sp.csc_matrix((np.zeros(len(fi)), fi, fp), shape=(nf, nf))
         self._view = SymmetricUpper(self.A)
-        self.solver = (make_tangent_solver(tangent_solver) if isinstance(tangent_solver, str)
-                       else tangent_solver)
+        # with method "lu" the symmetric solver only counts negative eigenvalues: LDL^T
+        self.solver = _tangent_solver("ldl" if method == "lu" else tangent_solver, frame, self.mask, nf)
         self.solver.analyse(self.A, self._view)
         self._lu = make_tangent_solver("lu") if self.method == "lu" else None
         self.negative = None
@@ -261,6 +262,28 @@ class FreeSystem:
 
 
 _splu = splu_or_raise
+
+
+def _tangent_solver(spec, frame, mask, nf):
+    """The TangentSolver of a FreeSystem from a name (None: option ``tangent_solver``) or an instance."""
+    from ..config import option
+
+    if spec is not None and not isinstance(spec, str):
+        return spec
+    name = option("tangent_solver", spec)
+    if name in ("amg", "auto"):
+        from ..linalg.tangent_backends import AMGTangent, auto_tangent_solver
+
+        N = mask.size // 6
+        nodes = np.empty((N, 3))
+        nodes[:frame.n_nodes] = frame.nodes
+        nodes[frame.n_nodes:] = frame.nodes.mean(axis=0)
+        if name == "auto":
+            return auto_tangent_solver(nf, nodes, mask)
+        return AMGTangent(nodes, mask, tol=min(option("tol"), 1e-10))
+    if name == "cholmod":
+        from ..linalg import tangent_backends  # noqa: F401  (registers it)
+    return make_tangent_solver(name)
 
 
 def _scatter_full(Ke, fmap, data):

@@ -218,7 +218,8 @@ class LinearSolver:
     maxiter : CG iteration limit (default 1000 for amg, 5000 for cg)
     hierarchy : a :class:`ScaledAMG` to reuse (built for a nearby operator; CG runs on A)
     cycle : "numba" (the V-cycle applied directly with parallel numba kernels,
-        :mod:`homtex.linalg.parallel_amg`) or "pyamg" (default: option ``amg_cycle``)
+        :mod:`homtex.linalg.parallel_amg`), "pyamg", or "gpu" (:mod:`homtex.linalg.gpu`, CuPy)
+        (default: option ``amg_cycle``)
     precision : "float64" or "float32" level matrices in the numba V-cycle (option ``amg_precision``)
     """
 
@@ -245,7 +246,12 @@ class LinearSolver:
                 self.M = self.ml.aspreconditioner(cycle="V")
                 self.operator_complexity = float(self.ml.operator_complexity())
                 self.cycle = option("amg_cycle", cycle)
-                if self.cycle == "numba":
+                if self.cycle == "gpu":
+                    from .gpu import DeviceAMG
+
+                    self.device = DeviceAMG(self.ml, A, device="gpu",
+                                            precision=option("amg_precision", precision))
+                elif self.cycle == "numba":
                     from .parallel_amg import BSROperator, VCycle
 
                     self.vcycle = VCycle(self.ml, precision=option("amg_precision", precision))
@@ -330,7 +336,14 @@ class LinearSolver:
     def _iterate(self, bs, x0, nb, rep):
         """Preconditioned CG on the scaled right-hand side, restarted from the current x (at most
         twice) while the true residual misses both criteria although the recurrence met them."""
-        if getattr(self, "cycle", None) == "numba":
+        if getattr(self, "cycle", None) == "gpu":
+            xp = self.device.xp
+
+            def run(x_start, maxiter):
+                x, h = self.device.pcg(xp.asarray(bs), x0=None if x_start is None else xp.asarray(x_start),
+                                       tol=self.tol, maxiter=maxiter)
+                return xp.asnumpy(x), h
+        elif getattr(self, "cycle", None) == "numba":
             from .parallel_amg import pcg as fast_pcg
 
             def run(x_start, maxiter):
