@@ -172,7 +172,6 @@ def test_gpu_cycle_option_without_cupy(block):
 
 # ----------------------------------------------------------------------------- tangent backends
 def _net_system(nx=9, shift=0.0):
-    from homtex.analysis.tangent import FreeSystem
 
     xs = np.linspace(0, 10, nx)
     X, Y = np.meshgrid(xs, xs, indexing="ij")

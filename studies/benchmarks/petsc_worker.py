@@ -23,9 +23,9 @@ def main(argv=None) -> None:
     argv = sys.argv[1:] if argv is None else argv
     r = int(argv[0]) if argv else 2
     tol = float(argv[1]) if len(argv) > 1 else 1e-8
+    from bench_core import build_problem
     from petsc4py import PETSc
 
-    from bench_core import build_problem
     from homtex.fem.assembly import Assembler
     from homtex.linalg.nullspace import rigid_body_modes
     from homtex.linalg.petsc_backend import petsc_solve
