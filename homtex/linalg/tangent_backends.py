@@ -168,6 +168,7 @@ class AMGTangent(TangentSolver):
         self.hierarchy = None
         self.builds = 0
         self._diag0 = None
+        self.K6 = None
 
     def _embed(self, A) -> sp.bsr_matrix:
         """The 6N x 6N BSR matrix with the free block A (full symmetric) and identity rows on the
@@ -193,8 +194,13 @@ class AMGTangent(TangentSolver):
         from .parallel_amg import BSROperator, VCycle, pcg
         from .solvers import ScaledAMG
 
-        K6 = self._embed(A)
         d = A.diagonal()
+        if np.any(d <= 0.0):              # a non-positive diagonal entry proves indefiniteness
+            self.report.positive_definite = False
+            self.report.negative = None
+            self.K6 = None
+            return
+        K6 = self._embed(A)
         change = 0.0 if self._diag0 is None else float(np.max(np.abs(d - self._diag0)) /
                                                        max(np.max(np.abs(self._diag0)), 1e-300))
         if self.hierarchy is None or self.rule.rebuild(change):
@@ -224,6 +230,9 @@ class AMGTangent(TangentSolver):
     def _solve(self, b):
         from .parallel_amg import pcg
 
+        if self.K6 is None:
+            raise SolverError("AMG-CG tangent solve: the tangent is not positive definite (a PTC shift or "
+                              "tangent_solver='ldl' is needed)")
         bf = np.zeros(self.mask.size)
         bf[self.free] = b
         nb = float(np.linalg.norm(b))
