@@ -136,6 +136,7 @@ class FreeSystem:
             fp, fi, self.full_map, _ = _slots(frame, fidx, upper=False)
             self.F = sp.csc_matrix((np.zeros(len(fi)), fi, fp), shape=(nf, nf))
         self._view = SymmetricUpper(self.A)
+        self._sym = None
         # with method "lu" the symmetric solver only counts negative eigenvalues: LDL^T
         self.solver = _tangent_solver("ldl" if method == "lu" else tangent_solver, frame, self.mask, nf)
         self.solver.analyse(self.A, self._view)

@@ -60,7 +60,10 @@ class CholmodTangent(TangentSolver):
         self._use_ldl = False
 
     def _analyse(self, A) -> None:
-        self._f = _cholmod.analyze(self.view.full(), mode=self.mode)
+        # the structural pattern (values of ones): the matrix may still be all zeros here, and a
+        # sum of sparse matrices drops zeros
+        U = sp.csc_matrix((np.ones(A.nnz), A.indices, A.indptr), shape=A.shape)
+        self._f = _cholmod.analyze((U + U.T).tocsc(), mode=self.mode)
         self._ldl = None
 
     def _factor(self, A, inertia: bool) -> None:
