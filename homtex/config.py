@@ -31,6 +31,8 @@ name                         default      meaning
                                           tangent, reused hierarchy), "auto" (rule: ``tangent_auto_dof``)
 ``tangent_auto_dof``         ``100000``   "auto": "ldl" below this many free DOFs, else "cholmod" where
                                           scikit-sparse imports, else "amg"
+``contact_aggregation``      ``"elements"`` AMG of contact systems: aggregate along the beam elements only
+                                          ("elements") or by the strength of the whole operator ("strength")
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
 ``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
                                           diagonal of the frame stiffness (about EA / L)
@@ -91,6 +93,7 @@ _DEFAULTS: dict[str, Any] = {
     "amg_precision": "float64",
     "tangent_solver": "ldl",
     "tangent_auto_dof": 100_000,
+    "contact_aggregation": "elements",
     "tol": 1e-10,
     "contact_penalty": None,
     "modulus_penalty": 5000.0,
@@ -109,6 +112,7 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "amg_precision": (lambda v: v in AMG_PRECISIONS, f"one of {AMG_PRECISIONS}"),
     "tangent_solver": (lambda v: v in TANGENT_SOLVERS, f"one of {TANGENT_SOLVERS}"),
     "tangent_auto_dof": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
+    "contact_aggregation": (lambda v: v in ("elements", "strength"), "'elements' or 'strength'"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),

@@ -96,13 +96,16 @@ def spectral_radius(A, steps: int = 20, seed: int = 0, parallel: bool = True) ->
 
 
 def sa_levels(As, B, *, max_coarse: int = 3000, max_levels: int = 10, omega: float = 4.0 / 3.0,
-              degree: int = 3, parallel: bool = True):
+              degree: int = 3, parallel: bool = True, strength0=None):
     """Smoothed-aggregation hierarchy of the scaled SPD operator ``As`` (unit diagonal, BSR 6x6)
     with near-null space ``B`` (n, 6): pyamg's symmetric strength (theta 0), standard
     aggregation and tentative prolongator; one Jacobi step P = (I - omega/rho D^-1 A) T with rho
     from :func:`spectral_radius`; Galerkin A_c = P^T A P; Chebyshev pre/post smoothers of
     ``degree`` (bounds rho/30, 1.1 rho as pyamg); coarse grid at most ``max_coarse`` unknowns,
-    solved by SuperLU. Returns a pyamg ``MultilevelSolver``."""
+    solved by SuperLU. ``strength0``: a node graph (nb, nb) sparse, used instead of the strength of
+    the finest level (contact systems: the beam elements only, so no aggregate spans two yarns
+    and each yarn keeps its own rigid-body modes on the coarse grid). Returns a pyamg
+    ``MultilevelSolver``."""
     from pyamg.aggregation.aggregate import standard_aggregation
     from pyamg.aggregation.tentative import fit_candidates
     from pyamg.multilevel import MultilevelSolver
@@ -129,7 +132,11 @@ def sa_levels(As, B, *, max_coarse: int = 3000, max_levels: int = 10, omega: flo
         rho_dinv = spectral_radius(BSROperator(sp.bsr_matrix(Ds @ A @ Ds, blocksize=A.blocksize),
                                                parallel=parallel), parallel=parallel)
         A.rho = spectral_radius(op, parallel=parallel) if np.ptp(d) > 1e-12 * d.max() else rho_dinv
-        C = symmetric_strength_of_connection(A, theta=0.0)
+        if strength0 is not None and len(levels) == 1:
+            C = sp.csr_matrix(strength0, dtype=float)
+            C.data[:] = 1.0
+        else:
+            C = symmetric_strength_of_connection(A, theta=0.0)
         AggOp, _ = standard_aggregation(C)
         T, Bc = fit_candidates(AggOp, Bc)
         Dinv = sp.diags(1.0 / np.where(d > 0, d, 1.0))

@@ -145,10 +145,13 @@ class ScaledAMG:
     Used as a preconditioner for CG on the unscaled A, so residuals stay in physical units.
     """
 
-    def __init__(self, A, B, *, max_coarse: int = 3000, degree: int = 3, setup: str | None = None):
+    def __init__(self, A, B, *, max_coarse: int = 3000, degree: int = 3, setup: str | None = None,
+                 node_graph=None):
         """max_coarse: largest coarse grid in unknowns (solved directly); degree: Chebyshev;
         setup: "fast" (:func:`homtex.linalg.parallel_amg.sa_levels`: the same smoothed aggregation
-        with Lanczos spectral bounds on numba products) or "pyamg" (default: option ``amg_setup``)."""
+        with Lanczos spectral bounds on numba products) or "pyamg" (default: option ``amg_setup``);
+        node_graph: (nodes, nodes) sparse graph aggregated on the finest level instead of the
+        strength of A ("fast" setup; contact systems pass the beam elements' graph)."""
         import pyamg
 
         d = np.asarray(A.diagonal(), dtype=float)
@@ -174,7 +177,7 @@ class ScaledAMG:
             from .parallel_amg import sa_levels
 
             self.ml = sa_levels(As, Bs if Bs is not None else np.ones((As.shape[0], 1)),
-                                max_coarse=max_coarse, degree=degree)
+                                max_coarse=max_coarse, degree=degree, strength0=node_graph)
         else:
             self.setup = "pyamg"
             self.ml = pyamg.smoothed_aggregation_solver(
@@ -201,9 +204,10 @@ class ScaledAMG:
         return spla.LinearOperator(self.shape, matvec=apply, dtype=float)
 
 
-def amg_hierarchy(A, B, *, max_coarse: int = 3000, degree: int = 3, setup: str | None = None) -> ScaledAMG:
+def amg_hierarchy(A, B, *, max_coarse: int = 3000, degree: int = 3, setup: str | None = None,
+                  node_graph=None) -> ScaledAMG:
     """pyamg smoothed aggregation tuned for beam frames (see :class:`ScaledAMG`)."""
-    return ScaledAMG(A, B, max_coarse=max_coarse, degree=degree, setup=setup)
+    return ScaledAMG(A, B, max_coarse=max_coarse, degree=degree, setup=setup, node_graph=node_graph)
 
 
 class LinearSolver:
@@ -221,11 +225,12 @@ class LinearSolver:
         :mod:`homtex.linalg.parallel_amg`), "pyamg", or "gpu" (:mod:`homtex.linalg.gpu`, CuPy)
         (default: option ``amg_cycle``)
     precision : "float64" or "float32" level matrices in the numba V-cycle (option ``amg_precision``)
+    node_graph : node graph aggregated on the finest level (see :class:`ScaledAMG`)
     """
 
     def __init__(self, A, *, method: str = "amg", B=None, tol: float | None = None,
                  maxiter: int | None = None, hierarchy=None, cycle: str | None = None,
-                 precision: str | None = None):
+                 precision: str | None = None, node_graph=None):
         if method not in METHODS:
             raise InputError(f"solver must be one of {METHODS}, got {method!r}")
         self.A = A
@@ -242,7 +247,7 @@ class LinearSolver:
             if method == "amg":
                 # a reused hierarchy (built for a nearby operator) is still a valid SPD
                 # preconditioner; CG runs on the new A, so the answer stays exact
-                self.ml = hierarchy if hierarchy is not None else amg_hierarchy(A, B)
+                self.ml = hierarchy if hierarchy is not None else amg_hierarchy(A, B, node_graph=node_graph)
                 self.M = self.ml.aspreconditioner(cycle="V")
                 self.operator_complexity = float(self.ml.operator_complexity())
                 self.cycle = option("amg_cycle", cycle)
