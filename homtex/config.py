@@ -25,12 +25,12 @@ name                         default      meaning
                                           "gpu" (hierarchy and CG on a CUDA device; the ``gpu`` extra)
 ``amg_precision``            ``"float64"`` values of the AMG level matrices in the V-cycle: "float64" or
                                           "float32" (half the bytes; CG stays in float64)
-``tangent_solver``           ``"ldl"``    tangent solves of ``solve_nonlinear`` and the large-motion engine:
+``tangent_solver``           ``"auto"``   tangent solves of ``solve_nonlinear`` and the large-motion engine:
                                           "ldl" (qdldl LDL^T, inertia counted), "cholmod" (supernodal
                                           Cholesky, scikit-sparse), "amg" (AMG-PCG on the PD PTC-shifted
                                           tangent, reused hierarchy), "auto" (rule: ``tangent_auto_dof``)
-``tangent_auto_dof``         ``100000``   "auto": "ldl" below this many free DOFs, else "cholmod" where
-                                          scikit-sparse imports, else "amg"
+``tangent_auto_dof``         ``30000``    "auto": "cholmod" from this many free DOFs on where scikit-sparse
+                                          imports, else "ldl" (measured: homtex.linalg.tangent_backends)
 ``contact_aggregation``      ``"elements"`` AMG of contact systems: aggregate along the beam elements only
                                           ("elements") or by the strength of the whole operator ("strength")
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
@@ -91,8 +91,8 @@ _DEFAULTS: dict[str, Any] = {
     "amg_setup": "fast",
     "amg_cycle": "numba",
     "amg_precision": "float64",
-    "tangent_solver": "ldl",
-    "tangent_auto_dof": 100_000,
+    "tangent_solver": "auto",
+    "tangent_auto_dof": 30_000,
     "contact_aggregation": "elements",
     "tol": 1e-10,
     "contact_penalty": None,

@@ -15,8 +15,12 @@ otherwise it is taken as positive definite (negative 0). A CG solve that meets a
 curvature later raises SolverError. Not a proof, so paths whose stability matters (arc length,
 bifurcations) keep ``"ldl"``.
 
-``"auto"``: the rule of option ``tangent_auto_dof``: below that many free DOFs ``"ldl"``, above it
-``"cholmod"`` where scikit-sparse imports, else ``"amg"``.
+``"auto"``: the rule of option ``tangent_auto_dof``: from that many free DOFs on ``"cholmod"`` where
+scikit-sparse imports, else ``"ldl"``. Measured on a 3D-loaded net of 1.01e5 DOF (5 load steps, 27
+Newton iterations, the same in every method; 2-core EPYC, load 4.5-5.5, process CPU seconds per
+Newton iteration): ldl 8.9 s, cholmod 1.86 s (4.8x; wall 8.7x), amg 6.0 s (1.5x; wall 2.0x), the
+answers equal to 4e-15. AMG is not chosen by the rule: it gains less than CHOLMOD and its
+inertia is a Krylov probe, not a count.
 """
 
 from __future__ import annotations
@@ -258,11 +262,9 @@ def auto_tangent_solver(nf: int, nodes=None, mask=None) -> TangentSolver:
     """The rule of option ``tangent_auto_dof`` (see the module docstring)."""
     from ..config import option
 
-    if nf < option("tangent_auto_dof") or (not cholmod_available() and nodes is None):
-        return QdldlTangent()
-    if cholmod_available():
+    if nf >= option("tangent_auto_dof") and cholmod_available():
         return CholmodTangent()
-    return AMGTangent(nodes, mask)
+    return QdldlTangent()
 
 
 register_tangent_solver("cholmod", CholmodTangent)
