@@ -33,6 +33,8 @@ name                         default      meaning
                                           imports, else "ldl" (measured: homtex.linalg.tangent_backends)
 ``contact_aggregation``      ``"elements"`` AMG of contact systems: aggregate along the beam elements only
                                           ("elements") or by the strength of the whole operator ("strength")
+``amg_threads``              ``None``     numba threads of the AMG-CG phase (None: numba's setting, 1 when the
+                                          load average says the other cores are busy)
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
 ``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
                                           diagonal of the frame stiffness (about EA / L)
@@ -91,6 +93,7 @@ _DEFAULTS: dict[str, Any] = {
     "amg_setup": "fast",
     "amg_cycle": "numba",
     "amg_precision": "float64",
+    "amg_threads": None,
     "tangent_solver": "auto",
     "tangent_auto_dof": 30_000,
     "contact_aggregation": "elements",
@@ -113,6 +116,7 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "tangent_solver": (lambda v: v in TANGENT_SOLVERS, f"one of {TANGENT_SOLVERS}"),
     "tangent_auto_dof": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
     "contact_aggregation": (lambda v: v in ("elements", "strength"), "'elements' or 'strength'"),
+    "amg_threads": (_threads, "None or an integer >= 1"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),

@@ -349,10 +349,18 @@ class LinearSolver:
                                        tol=self.tol, maxiter=maxiter)
                 return xp.asnumpy(x), h
         elif getattr(self, "cycle", None) == "numba":
+            import numba
+
+            from .parallel_amg import cg_threads
             from .parallel_amg import pcg as fast_pcg
 
             def run(x_start, maxiter):
-                return fast_pcg(self.Aop, bs, self.vcycle, x0=x_start, tol=self.tol, maxiter=maxiter)
+                old = numba.get_num_threads()
+                numba.set_num_threads(cg_threads(option("amg_threads")))
+                try:
+                    return fast_pcg(self.Aop, bs, self.vcycle, x0=x_start, tol=self.tol, maxiter=maxiter)
+                finally:
+                    numba.set_num_threads(old)
         else:
             def run(x_start, maxiter):
                 return pcg(self.A, bs, self.M, x0=x_start, tol=self.tol, maxiter=maxiter)

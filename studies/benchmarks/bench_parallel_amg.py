@@ -79,12 +79,15 @@ def changed_matrix(frame, mask, seed=1):
 def cg_phase(lin, b, threads: int):
     import numba
 
+    import homtex
+
     old = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
-        lin.solve(b)                                  # warm (first calls, page faults)
-        with Clock() as c:
-            x, rep = lin.solve(b)
+        with homtex.set_options(amg_threads=threads):  # forced: no load-average rule here
+            lin.solve(b)                               # warm (first calls, page faults)
+            with Clock() as c:
+                x, rep = lin.solve(b)
     finally:
         numba.set_num_threads(old)
     return x, rep, c
