@@ -35,6 +35,9 @@ name                         default      meaning
                                           ("elements") or by the strength of the whole operator ("strength")
 ``amg_threads``              ``None``     numba threads of the AMG-CG phase (None: numba's setting, 1 when the
                                           load average says the other cores are busy)
+``amg_reuse``                ``False``    keep AMG hierarchies per matrix pattern across solves (load steps,
+                                          study points on one cell) and rebuild them by a measured rule
+                                          (homtex.linalg.reuse)
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
 ``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
                                           diagonal of the frame stiffness (about EA / L)
@@ -94,6 +97,7 @@ _DEFAULTS: dict[str, Any] = {
     "amg_cycle": "numba",
     "amg_precision": "float64",
     "amg_threads": None,
+    "amg_reuse": False,
     "tangent_solver": "auto",
     "tangent_auto_dof": 30_000,
     "contact_aggregation": "elements",
@@ -117,6 +121,7 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "tangent_auto_dof": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
     "contact_aggregation": (lambda v: v in ("elements", "strength"), "'elements' or 'strength'"),
     "amg_threads": (_threads, "None or an integer >= 1"),
+    "amg_reuse": (_bool, "True or False"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),

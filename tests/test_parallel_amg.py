@@ -305,3 +305,20 @@ def test_petsc_gamg_matches_homtex_amg(procs):
     rep = json.loads(line[0].split(" ", 1)[1])
     assert rep["processes"] == procs and rep["reason"] > 0
     assert rep["residual"] <= 1e-9 and rep["difference"] <= 1e-6
+
+
+def test_hierarchy_cache_reuses_on_a_changed_matrix(block):
+    from homtex.linalg.reuse import CACHE, pattern_key
+
+    f, A, b, mask = block
+    CACHE.clear()
+    A2 = A.copy()
+    A2.data *= 1.1                                     # same pattern, new values
+    assert pattern_key(A) == pattern_key(A2)
+    with homtex.set_options(amg_reuse=True):
+        x1, r1 = LinearSolver(A, method="amg", B=rigid_body_modes(f.nodes), tol=1e-10).solve(b)
+        lin2 = LinearSolver(A2, method="amg", B=rigid_body_modes(f.nodes), tol=1e-10)
+        x2, r2 = lin2.solve(b)
+    assert not r1.reused_setup and r2.reused_setup and CACHE.builds == 1 and CACHE.reuses == 1
+    assert np.abs(1.1 * x2 - x1).max() <= 1e-7 * np.abs(x1).max()   # (1.1 A) x2 = b
+    CACHE.clear()

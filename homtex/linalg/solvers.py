@@ -247,6 +247,12 @@ class LinearSolver:
             if method == "amg":
                 # a reused hierarchy (built for a nearby operator) is still a valid SPD
                 # preconditioner; CG runs on the new A, so the answer stays exact
+                self._cache = None
+                if hierarchy is None and option("amg_reuse"):
+                    from .reuse import CACHE
+
+                    hierarchy, self.reused = CACHE.get(A, B, node_graph=node_graph)
+                    self._cache = CACHE
                 self.ml = hierarchy if hierarchy is not None else amg_hierarchy(A, B, node_graph=node_graph)
                 self.M = self.ml.aspreconditioner(cycle="V")
                 self.operator_complexity = float(self.ml.operator_complexity())
@@ -318,6 +324,8 @@ class LinearSolver:
             else:
                 xs = self._iterate(bs, None if x0 is None else np.asarray(x0, dtype=float) / scale, nb, rep)
         rep.solve_seconds = time.perf_counter() - t0
+        if getattr(self, "_cache", None) is not None:
+            self._cache.record(self.A, rep.iterations, rep.solve_seconds)
         if not np.all(np.isfinite(xs)):
             raise SolverError(f"{rep.method} solve produced non-finite values "
                               f"(singular or indefinite matrix?)", history=rep.history, report=rep)
