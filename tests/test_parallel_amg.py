@@ -295,7 +295,7 @@ def test_petsc_gamg_matches_homtex_amg(procs):
     env = dict(os.environ, PYTHONPATH=str(root), OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1")
     env.setdefault("NUMBA_CACHE_DIR", "/tmp/homtex-petsc-numba")
-    cmd = [mpiexec, "-n", str(procs), py, str(root / "studies/benchmarks/petsc_worker.py"), "2",
+    cmd = [mpiexec, "-n", str(procs), py, str(root / "studies/benchmarks/_petsc_worker.py"), "2",
            "1e-10"]
     r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
     line = [x for x in r.stdout.splitlines() if x.startswith("PETSC_RESULT ")]

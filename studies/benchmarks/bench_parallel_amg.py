@@ -16,7 +16,7 @@ For every size (octet cells per edge) it measures, in one run, to a relative res
 * CHOLMOD (scikit-sparse, BLAS threads) where it imports: analysis + factorisation + solve
   (fresh), numeric refactorisation with the symbolic analysis reused + solve (changed matrix);
 * optionally (``--petsc PYTHON``) PETSc CG + GAMG with the six rigid-body modes on 1 and 2 MPI
-  processes (petsc_worker.py under mpiexec, PYTHON a Python with petsc4py).
+  processes (_petsc_worker.py under mpiexec, PYTHON a Python with petsc4py).
 
 The machine (CPU model, cores) and the load average at the start of the run and of every size are
 stored with the data and printed on the chart. On a shared machine the wall-clock ratios of 1 and
@@ -191,7 +191,7 @@ def petsc_run(python: str, r: int, procs: int) -> dict | None:
     env = dict(os.environ, PYTHONPATH=str(root), OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1", NUMBA_CACHE_DIR="/tmp/homtex-petsc-numba")
     cmd = [shutil.which("mpiexec") or "mpiexec", "-n", str(procs), python,
-           str(Path(__file__).resolve().parent / "petsc_worker.py"), str(r), str(TOL)]
+           str(Path(__file__).resolve().parent / "_petsc_worker.py"), str(r), str(TOL)]
     res = subprocess.run(cmd, capture_output=True, text=True, env=env)
     line = [x for x in res.stdout.splitlines() if x.startswith("PETSC_RESULT ")]
     if not line:

@@ -1,7 +1,7 @@
 """One PETSc solve of a slender octet block under MPI, against homtex's own AMG-CG (rank 0).
 
 Not a study of its own: ``bench_parallel_amg.py --petsc PYTHON`` and tests/test_petsc_backend.py
-run it as ``mpiexec -n P PYTHON studies/benchmarks/petsc_worker.py R TOL`` (R octet cells per edge)
+run it as ``mpiexec -n P PYTHON studies/benchmarks/_petsc_worker.py R TOL`` (R octet cells per edge)
 and read the JSON line rank 0 prints: PETSc's iterations, setup and solve seconds, and the
 largest difference from homtex's AMG-CG answer relative to its largest displacement.
 """
