@@ -58,7 +58,7 @@ class DeviceAMG:
     """
 
     def __init__(self, hierarchy, A, *, device: str = "gpu", precision: str = "float64"):
-        from .multirhs import _chebyshev_coefficients
+        from .parallel_amg import chebyshev_coefficients
 
         xp, xsp = array_module(device)
         self.xp, self.device = xp, device
@@ -75,7 +75,7 @@ class DeviceAMG:
         self.levels = []
         for i, lvl in enumerate(ml.levels[:-1]):
             self.levels.append({"A": put(lvl.A, dt), "P": put(lvl.P, dt), "R": put(lvl.R, dt),
-                                "coef": [float(c) for c in _chebyshev_coefficients(lvl.A, deg)]})
+                                "coef": [float(c) for c in chebyshev_coefficients(lvl.A, deg)]})
         Ac = ml.levels[-1].A.toarray()
         self.coarse_inv = xp.asarray(np.linalg.inv(Ac).astype(dt))
         self.scale = xp.asarray(np.asarray(hierarchy.scale, dtype=float))
@@ -148,7 +148,7 @@ def device_solve(A, b, B, *, tol: float = 1e-8, device: str = "gpu", precision: 
     ``hierarchy``: a ScaledAMG to reuse (a changed matrix: CG runs on the new A), else built on
     the host (fast setup). Timings (s): setup, transfer, solve, per_iteration, total; iterations,
     residual (true, on the host)."""
-    from .solvers import ScaledAMG
+    from .amg import ScaledAMG
 
     t_all = time.perf_counter()
     t0 = time.perf_counter()

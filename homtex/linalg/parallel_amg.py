@@ -52,6 +52,16 @@ def cg_threads(requested=None) -> int:
     return n
 
 
+def chebyshev_coefficients(A, degree: int) -> np.ndarray:
+    """pyamg's Chebyshev smoother coefficients for level matrix A (its cached rho): bounds rho/30
+    and 1.1 rho, the constant coefficient dropped (pyamg's setup_chebyshev)."""
+    from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
+    from pyamg.util.linalg import approximate_spectral_radius
+
+    rho = approximate_spectral_radius(A)  # cached on A by pyamg's own smoother setup (A.rho)
+    return -chebyshev_polynomial_coefficients(rho / 30.0, rho * 1.1, degree)[:-1]
+
+
 class BSROperator:
     """A BSR matrix prepared for the one-vector kernels: ``op.apply(x, y, alpha=0, z=None, s=1)``
     writes y = alpha z + s A x (float64 vectors); ``op.dot_apply(x, y)`` writes y = A x and returns
@@ -186,8 +196,6 @@ class VCycle:
     (still SPD; CG stays in float64 on the unscaled operator, so the answer keeps its accuracy)."""
 
     def __init__(self, hierarchy, precision: str = "float64", parallel: bool = True):
-        from .multirhs import _chebyshev_coefficients
-
         ml = hierarchy.ml
         deg = getattr(hierarchy, "degree", 3)
         self.scale = np.ascontiguousarray(hierarchy.scale, dtype=float)
@@ -201,7 +209,7 @@ class VCycle:
                 rec["A"] = BSROperator(lvl.A, precision, parallel)
                 rec["P"] = BSROperator(lvl.P, precision, parallel)
                 rec["R"] = BSROperator(lvl.R, precision, parallel)
-                rec["coef"] = [float(c) for c in _chebyshev_coefficients(lvl.A, deg)]
+                rec["coef"] = [float(c) for c in chebyshev_coefficients(lvl.A, deg)]
                 nc = lvl.R.shape[0]
                 rec.update(x=np.empty(n), r=np.empty(n), h=np.empty(n), h2=np.empty(n), cb=np.empty(nc))
             self.levels.append(rec)

@@ -54,7 +54,7 @@ class HierarchyCache:
         self._store.clear()
 
     def get(self, A, B, **kw):
-        from .solvers import ScaledAMG
+        from .amg import ScaledAMG
         from .tangent_backends import ReuseRule
 
         key = pattern_key(A)

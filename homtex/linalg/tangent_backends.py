@@ -197,9 +197,9 @@ class AMGTangent(TangentSolver):
         self._diag0 = None
 
     def _factor(self, A, inertia: bool) -> None:
+        from .amg import ScaledAMG
         from .nullspace import rigid_body_modes
         from .parallel_amg import BSROperator, VCycle, pcg
-        from .solvers import ScaledAMG
 
         d = A.diagonal()
         if np.any(d <= 0.0):              # a non-positive diagonal entry proves indefiniteness
