@@ -76,15 +76,16 @@ def changed_matrix(frame, mask, seed=1):
     return constrain(asm.stiffness((R, L, EA * s, GJ * s, EIy * s, EIz * s, kGA * s)), mask)
 
 
-def cg_phase(lin, b, threads: int):
+def cg_phase(lin, b, threads: int | None):
+    """Warm solve, then the timed one; ``threads`` forced (None: the solver's load-average rule)."""
     import numba
 
     import homtex
 
     old = numba.get_num_threads()
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(threads or 2, numba.config.NUMBA_NUM_THREADS))
     try:
-        with homtex.set_options(amg_threads=threads):  # forced: no load-average rule here
+        with homtex.set_options(amg_threads=threads):  # forced unless None
             lin.solve(b)                               # warm (first calls, page faults)
             with Clock() as c:
                 x, rep = lin.solve(b)
@@ -146,12 +147,12 @@ def run_size(r: int, bw1: float, bw2: float, petsc: str | None) -> dict:
     # reuse on a changed matrix
     A2 = changed_matrix(f, mask)
     lin = LinearSolver(A2, method="amg", tol=TOL, hierarchy=h)
-    _, rep, c = cg_phase(lin, b, 2)
-    out["reuse_cg"], out["reuse_it"] = c.wall, rep.iterations
+    _, rep, c = cg_phase(lin, b, None)
+    out["reuse_cg"], out["reuse_cg_cpu"], out["reuse_it"] = c.wall, c.cpu, rep.iterations
     with Clock() as c:
         lin2 = LinearSolver(A2, method="amg", B=B, tol=TOL)
     out["rebuild_setup"] = c.wall
-    _, rep2, c2 = cg_phase(lin2, b, 2)
+    _, rep2, c2 = cg_phase(lin2, b, None)
     out["rebuild_cg"], out["rebuild_it"] = c2.wall, rep2.iterations
     print(f"   reuse: {out['reuse_it']} it {out['reuse_cg']:.2f} s; rebuild: setup {out['rebuild_setup']:.2f} s + "
           f"{out['rebuild_it']} it {out['rebuild_cg']:.2f} s", flush=True)
@@ -167,7 +168,7 @@ def run_size(r: int, bw1: float, bw2: float, petsc: str | None) -> dict:
         with Clock() as c:
             F.cholesky_inplace(sp.csc_matrix(A2))
             F(b)
-        out["cholmod_refactor"] = c.wall
+        out["cholmod_refactor"], out["cholmod_refactor_cpu"] = c.wall, c.cpu
         with Clock() as c:
             F(b)
         out["cholmod_resolve"] = c.wall
