@@ -12,7 +12,7 @@ Usage::
     python studies/benchmarks/bench_tangent_solvers.py [--out DIR] [--quick] [--nx N ...]
 
 Default nx = 60, 130 (2.2e4, 1.0e5 DOF; the 1e5 qdldl run takes several minutes); ``--quick``:
-nx = 16 (seconds).
+nx = 10 (seconds).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def main(argv=None) -> None:
 
     load0 = os.getloadavg()[0]
     print(f"{machine()}, load {load0:.2f}", flush=True)
-    sizes = tuple(a.nx) if a.nx else ((16,) if a.quick else (60, 130))
+    sizes = tuple(a.nx) if a.nx else ((10,) if a.quick else (60, 130))
     rows = [run(n) for n in sizes]
     keys = sorted({k for r in rows for k in r})
     ds = xr.Dataset({k: (("size",), np.array([r.get(k, np.nan) for r in rows], float),
