@@ -18,6 +18,26 @@ name                         default      meaning
                                           small, often ill-conditioned contact systems
 ``nonlinear_solver``         ``"auto"``   ``solve_nonlinear``: "auto" (LU where moments act on free rotations,
                                           else LDL^T), "ldl", "lu" ("direct" = "ldl")
+``amg_setup``                ``"fast"``   AMG hierarchy setup: "fast" (Lanczos spectral bounds on the numba
+                                          products) or "pyamg" (pyamg's own, restarted Arnoldi bounds)
+``amg_cycle``                ``"numba"``  AMG-CG phase: "numba" (V-cycle applied directly, fused parallel
+                                          kernels), "pyamg" (pyamg's preconditioner, scipy products) or
+                                          "gpu" (hierarchy and CG on a CUDA device; the ``gpu`` extra)
+``amg_precision``            ``"float64"`` values of the AMG level matrices in the V-cycle: "float64" or
+                                          "float32" (half the bytes; CG stays in float64)
+``tangent_solver``           ``"auto"``   tangent solves of ``solve_nonlinear`` and the large-motion engine:
+                                          "ldl" (qdldl LDL^T, inertia counted), "cholmod" (supernodal
+                                          Cholesky, scikit-sparse), "amg" (AMG-PCG on the PD PTC-shifted
+                                          tangent, reused hierarchy), "auto" (rule: ``tangent_auto_dof``)
+``tangent_auto_dof``         ``30000``    "auto": "cholmod" from this many free DOFs on where scikit-sparse
+                                          imports, else "ldl" (measured: homtex.linalg.tangent_backends)
+``contact_aggregation``      ``"elements"`` AMG of contact systems: aggregate along the beam elements only
+                                          ("elements") or by the strength of the whole operator ("strength")
+``amg_threads``              ``None``     numba threads of the AMG-CG phase (None: numba's setting, 1 when the
+                                          load average says the other cores are busy)
+``amg_reuse``                ``False``    keep AMG hierarchies per matrix pattern across solves (load steps,
+                                          study points on one cell) and rebuild them by a measured rule
+                                          (homtex.linalg.reuse)
 ``tol``                      ``1e-10``    relative residual of iterative linear solves, in (0, 1)
 ``contact_penalty``          ``None``     contact stiffness k, N/mm; None: the mean translational
                                           diagonal of the frame stiffness (about EA / L)
@@ -56,6 +76,10 @@ SERIAL_BELOW_DOF = 50_000
 
 SOLVERS = ("amg", "direct", "cg")
 NONLINEAR_SOLVERS = ("auto", "ldl", "lu", "direct")
+AMG_SETUPS = ("fast", "pyamg")
+TANGENT_SOLVERS = ("ldl", "cholmod", "amg", "auto")
+AMG_CYCLES = ("numba", "pyamg", "gpu")
+AMG_PRECISIONS = ("float64", "float32")
 
 
 def _choice(choices) -> Callable[[Any], bool]:
@@ -98,6 +122,14 @@ _DEFAULTS: dict[str, Any] = {
     "homogenize_solver": "amg",
     "compress_solver": "direct",
     "nonlinear_solver": "auto",
+    "amg_setup": "fast",
+    "amg_cycle": "numba",
+    "amg_precision": "float64",
+    "amg_threads": None,
+    "amg_reuse": False,
+    "tangent_solver": "auto",
+    "tangent_auto_dof": 30_000,
+    "contact_aggregation": "elements",
     "tol": 1e-10,
     "contact_penalty": None,
     "modulus_penalty": 5000.0,
@@ -111,6 +143,14 @@ _VALIDATORS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "homogenize_solver": (_solver, f"one of {SOLVERS}"),
     "compress_solver": (_solver, f"one of {SOLVERS}"),
     "nonlinear_solver": (_choice(NONLINEAR_SOLVERS), f"one of {NONLINEAR_SOLVERS}"),
+    "amg_setup": (_choice(AMG_SETUPS), f"one of {AMG_SETUPS}"),
+    "amg_cycle": (_choice(AMG_CYCLES), f"one of {AMG_CYCLES}"),
+    "amg_precision": (_choice(AMG_PRECISIONS), f"one of {AMG_PRECISIONS}"),
+    "tangent_solver": (_choice(TANGENT_SOLVERS), f"one of {TANGENT_SOLVERS}"),
+    "tangent_auto_dof": (lambda v: _integer(v) and v >= 1, "an integer >= 1"),
+    "contact_aggregation": (_choice(("elements", "strength")), "'elements' or 'strength'"),
+    "amg_threads": (_threads, "None or an integer >= 1"),
+    "amg_reuse": (_bool, "True or False"),
     "tol": (_tol, "a finite number in (0, 1)"),
     "contact_penalty": (_penalty, "None or a positive stiffness in N/mm"),
     "modulus_penalty": (_penalty, "a positive stiffness in N/mm"),
