@@ -54,11 +54,15 @@ def follow_lambda(eq: Equilibrium, rec: PathRecorder, steps: int, control: str) 
             cap = None if rate is None else s.max_growth * rate * (target - snap[2])
             it, rn, pred = eq.correct(target, cap)
             _check_jump(eq, snap, pred)
-            rate = _check_growth(eq, snap, rate, target - snap[2])
+            new_rate = _check_growth(eq, snap, rate, target - snap[2])
             if not eq.negative:
                 err = rec.step_energy_error(eq, rec.prev, rec.ends(eq))
                 if err > ENERGY_TOL:
                     raise StepFailed(f"the step's work misses its strain energy by {100 * err:.3g} % (a jump)")
+            # only an accepted step sets the rate: a rejected one (a stiffening structure's first
+            # long step, whose work misses its energy) would cap every shorter retry below its own
+            # linear predictor, and the step would be cut to nothing
+            rate = new_rate
         except StepFailed as err:
             eq.restore(snap)
             h = 0.5 * (target - snap[2])
