@@ -38,6 +38,9 @@ _LAZY = {
     "Lookup": ".lookup",
     "solve_nonlinear": ".api",
     "Corotational": ".analysis.nonlinear",
+    "Lattice": ".contact.lattice",
+    "RestState": ".model.rest",
+    "YarnCompression": ".model.compression",
 }
 
 __all__ = ["CellError", "InputError", "SolverError", "StrainWarning", "StudyError",

@@ -15,6 +15,7 @@ from .config import option, threads_for
 from .contact.compress import CompressionTest, run_compression
 from .contact.engine import run_engine
 from .contact.incremental import NonlinearSettings
+from .contact.lattice import Lattice
 from .contact.options import Contact
 from .contact.solver import solve_contact
 from .errors import InputError, SolverError
@@ -22,6 +23,7 @@ from .fem.assembly import Assembler
 from .linalg.solvers import SINGULAR
 from .model.arrays import as_real
 from .model.frame import Frame
+from .model.rest import RestState
 from .model.results import StaticResult
 from .model.scene import Scene
 from .model.topology import singular_diagnosis
@@ -236,7 +238,7 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
                     steps: int = 10, tol: float | None = None, atol: float | None = None, max_iter: int | None = None,
                     max_cuts: int | None = None, geometric: str = "full", solver: str | None = None,
                     perturbation: float = 1e-2, arc_length: float | None = None, monitor=None,
-                    progress: bool | None = None) -> NonlinearResult:
+                    progress: bool | None = None, rest=None, lattice=None) -> NonlinearResult:
     """Large-rotation static solve of a frame, following the load path; with ``contact`` the
     large-motion engine (yarns that touch, slide with friction and never pass through each other).
 
@@ -279,6 +281,13 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
     monitor : node indices whose displacements and forces the path records (default: the loaded
         nodes and those with prescribed motions).
     progress : progress reports of the engine (default: option ``progress``).
+    rest : a :class:`homtex.RestState` (engine): the yarns' stress-free shape when it is not the
+        frame's geometry, e.g. ``homtex.model.rest.straight_rest(frame)`` for knitted loops of a
+        straight yarn; strain energies and their split count from it.
+    lattice : a :class:`homtex.Lattice` (engine, periodic frames): lattice vectors as unknowns,
+        held, prescribed (``motion``, mm at lambda = 1: a macro stretch) or free (zero average
+        force: free lateral contraction, a cell relaxing to its own size), with dead forces on
+        free components (``force``, N); the path records ``periods`` and ``lattice_force``.
 
     Returns
     -------
@@ -300,8 +309,8 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
         raise InputError(f"frame must be a homtex.Frame or a homtex Cell, got {type(frame).__name__}")
     if initial is not None and not isinstance(initial, NonlinearResult):
         raise InputError(f"initial must be the NonlinearResult of an earlier solve, got {type(initial).__name__}")
-    engine = contact is not None or plates is not None or prestrain is not None or \
-        (initial is not None and initial.state is not None)
+    engine = contact is not None or plates is not None or prestrain is not None or rest is not None or \
+        lattice is not None or (initial is not None and initial.state is not None)
     if not engine:
         if initial is not None:
             raise InputError("initial: this result comes from a solve without contact, which cannot be continued; "
@@ -343,8 +352,12 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
             raise InputError(f"monitor must be node indices in 0..{fr.n_nodes - 1}, got {monitor!r}")
     spec = getattr(cell, "friction_spec", None) if cell is not None else None
     friction_spec = spec() if callable(spec) and contact.friction is None else None
+    if lattice is not None and not isinstance(lattice, Lattice):
+        raise InputError(f"lattice must be a homtex.Lattice, got {type(lattice).__name__}")
+    if rest is not None and not isinstance(rest, RestState):
+        raise InputError(f"rest must be a homtex.RestState, got {type(rest).__name__}")
     with threads_for(fr.ndof):
         return run_engine(fr, fixed, loads, contact=contact, plates=plates, steps=steps, prestrain=prestrain,
                           initial=None if initial is None else initial.state, friction_spec=friction_spec,
                           max_cuts=max_cuts, settings=settings, monitor=monitor,
-                          progress=option("progress", progress))
+                          progress=option("progress", progress), rest=rest, lattice=lattice)

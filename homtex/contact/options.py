@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..model.compression import YarnCompression
 from ..validate import check_choice, check_int, check_number
 
 __all__ = ["Contact", "ENFORCEMENTS", "STRATEGIES"]
@@ -63,6 +64,10 @@ class Contact:
         below it a contact sticks elastically). Default: 1e-3 x the thinnest contact radius (1e-4 mm
         for 0.1 mm yarns): steps that slide a contact by less than eps_v see a friction force below
         mu N, so eps_v must stay well below the slip of a step on the thinnest yarns.
+    compression : a :class:`~homtex.model.compression.YarnCompression` (large-motion engine):
+        yarns with a soft shell over a hard core that flatten where they cross (force k delta^n
+        of the outer surfaces' overlap delta; the barrier acts at the cores). None (default):
+        solid yarns of their contact radius.
     max_forward_error : with the direct solver, each solve is refined once; a relative
         correction above this (an ill-conditioned system, e.g. a penalty far above the beam
         stiffness) raises SolverError instead of returning an inaccurate state.
@@ -90,6 +95,7 @@ class Contact:
     barrier_gap: float = 0.01
     barrier_stiffness: float | None = None
     friction_slip: float | None = None
+    compression: YarnCompression | None = None
 
     def __setattr__(self, name, value):
         """Every assignment is checked like the constructor's arguments: ``c.friction = -5`` raises
@@ -109,7 +115,11 @@ class Contact:
         return bool((self.friction or 0.0) > 0.0 or (self.plate_friction or 0.0) > 0.0)
 
     def require_frictionless(self, what: str = "the linear contact solve") -> None:
-        """InputError if friction was asked for where only frictionless contact exists."""
+        """InputError if friction (or a compressible yarn law) was asked for where only
+        frictionless contact of solid yarns exists."""
+        if self.compression is not None:
+            raise InputError(f"Contact option 'compression': {what} has solid yarns; a compressible yarn law needs "
+                             "the large-motion engine, geometry=\"nonlinear\"")
         if self.has_friction:
             raise InputError(f"Contact option 'friction' = {self.friction!r} (plate_friction {self.plate_friction!r}): "
                              f"{what} is frictionless; Coulomb friction needs the large-motion engine, "
@@ -144,6 +154,12 @@ def _int(name, **bounds):
     return lambda v: check_int(v, _named(name), **bounds)
 
 
+def _compression(v):
+    if v is not None and not isinstance(v, YarnCompression):
+        raise InputError(f"{_named('compression')} must be a homtex.YarnCompression or None, got {type(v).__name__}")
+    return v
+
+
 #: the check of every Contact option (run by the constructor and on every assignment)
 _CHECKS = {
     "strategy": _choice("strategy", STRATEGIES),
@@ -162,4 +178,5 @@ _CHECKS = {
     "barrier_gap": _num("barrier_gap", " (relative to the smallest contact radius)", gt=0.0, le=0.5),
     "barrier_stiffness": _optional(_num("barrier_stiffness", " (N/mm)", gt=0.0, le=1e12)),
     "friction_slip": _optional(_num("friction_slip", " (mm)", gt=0.0, le=1.0)),
+    "compression": _compression,
 }
