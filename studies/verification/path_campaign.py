@@ -15,6 +15,9 @@ Families (reference; tolerance on the compared quantity):
 * ``shortening``: pinned-pinned column shortened by 20 % under displacement control (the elastica's
   end force / P_cr, 5e-3); an imperfection is a lateral load of 1e-4 P_cr at mid-span.
 * ``moment``: end moment 2 pi EI / L rolling a cantilever into a circle (tip at the root, 1e-3 L).
+* ``string``: clamped-clamped rod under a central transverse load that a string carries at a slope
+  of 0.1 (a stiffening path: the flat start's tangent sees bending only; the state of a 200-step
+  run, 1e-3); an imperfection is an axial load of 1e-3 of the transverse one.
 * ``arch``: clamped shallow arch (rise 2 % of the span) under a crown load far above its limit load,
   arc length (the first limit load from a converged run with a small reference load, 2 %).
 * ``lee``: Lee's frame by arc length driven by the load node's prescribed motion (the final state of
@@ -24,7 +27,7 @@ Usage::
 
     python studies/verification/path_campaign.py [--out DIR] [--quick]
 
-Default: 528 runs (about 10 minutes on the 2-core machine); ``--quick``: 12. Writes
+Default: 592 runs (about 10 minutes on the 2-core machine); ``--quick``: 13. Writes
 ``DIR/path_campaign.nc``, ``DIR/path_campaign.png`` and ``DIR/path_campaign.md`` (the table).
 """
 import sys
@@ -153,7 +156,27 @@ def lee(slender, plane, steps, imperfect):
     return res, float(np.abs(res.x - _LEE["ref"]).max()) / 120.0, 0.0, 1e-3 if not imperfect else 2e-2
 
 
-FAMILIES = {"column": column, "shortening": shortening, "moment": moment, "arch": arch, "lee": lee}
+_STRING = {}
+
+
+def string(slender, plane, steps, imperfect):
+    from homtex import solve_nonlinear
+
+    n_el, a = 40, L / 2
+    r = L / slender
+    fr = _line(n_el, r)
+    t = 0.1                                             # the string's slope w / a
+    F = 2 * E * np.pi * r ** 2 * (np.sqrt(1 + t * t) - 1) * t / np.sqrt(1 + t * t)
+    fixed = _planar(n_el + 1, {0: "all", n_el: "all"}) if plane else {0: "all", n_el: "all"}
+    loads = {n_el // 2: (1e-3 * F if imperfect else 0.0, F, 0, 0, 0, 0)}
+    key = (slender, plane, imperfect)
+    if key not in _STRING:
+        _STRING[key] = float(solve_nonlinear(fr, fixed, loads, steps=200).u[n_el // 2, 1]) / a
+    res = solve_nonlinear(fr, fixed, loads, steps=steps)
+    return res, float(res.u[n_el // 2, 1]) / a, _STRING[key], 1e-3 * abs(_STRING[key])
+
+
+FAMILIES = {"string": string, "column": column, "shortening": shortening, "moment": moment, "arch": arch, "lee": lee}
 
 
 def classify(run):
@@ -182,7 +205,8 @@ def cases(quick: bool):
                     ("moment", 1e4, False, 4, False), ("moment", 1e2, True, 1, False),
                     ("arch", 200.0, True, 10, False), ("arch", 200.0, True, 40, True),
                     ("lee", 0, True, 100, False), ("column", 1e4, True, 20, True),
-                    ("shortening", 1e4, False, 20, False), ("moment", 1e5, True, 8, False)]
+                    ("shortening", 1e4, False, 20, False), ("moment", 1e5, True, 8, False),
+                    ("string", 1e3, True, 1, False)]
         return
     slender = (1e2, 1e3, 1e4, 1e5)
     for fam, step_list in (("column", (1, 3, 7, 20, 29, 31)), ("shortening", (1, 3, 7, 20, 31, 100)),
@@ -192,6 +216,11 @@ def cases(quick: bool):
                 for steps in step_list:
                     for imp in (False, True):
                         yield fam, s, plane, steps, imp
+    for s in slender:
+        for plane in (True, False):
+            for steps in (1, 2, 5, 20):
+                for imp in (False, True):
+                    yield "string", s, plane, steps, imp
     for s in (100.0, 200.0, 1e3):
         for plane in (True, False):
             for steps in (10, 20, 40, 400):
