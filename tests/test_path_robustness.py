@@ -175,3 +175,15 @@ def test_a_stiffening_string_under_load_control_reaches_the_membrane_answer(step
     res = solve_nonlinear(fr, {0: "all", 40: "all"}, {20: (0, 0, -F, 0, 0, 0)}, steps=steps)
     assert res.path.attrs["status"] == "ok" and res.stable
     assert -res.u[20, 2] == pytest.approx(w, rel=3e-3)
+
+
+def test_a_round_slender_column_regaining_stability_by_two_eigenvalues_in_one_arc():
+    """3D, L/r = 1000, one load step to 1.5 P_cr: on the secondary branch an arc passes the double
+    eigenvalue back (stability regained by two at once); the check of a multiple eigenvalue asked
+    for zero eigenvalues there and raised a bare ValueError. Now the tip sits on the elastica."""
+    L = 100.0
+    fr, fixed, Pcr = cantilever_column(1000, False)
+    res = solve_nonlinear(fr, fixed, {30: (-1.5 * Pcr, 0, 0, 0, 0, 0)}, steps=1)
+    m = brentq(lambda m: (2 * ellipk(m) / np.pi) ** 2 - 1.5, 1e-9, 0.999)
+    tip = res.x[30] - [L, 0, 0]
+    assert res.stable and np.hypot(tip[1], tip[2]) / L == pytest.approx(2 * np.sqrt(m) / ellipk(m), abs=5e-4)
