@@ -124,12 +124,14 @@ def arch(slender, plane, steps, imperfect):
     key = (slender, plane)
     if key not in _ARCH:
         ref = solve_nonlinear(fr, fixed, {n // 2: (0, -1.25 * scale, 0, 0, 0, 0)}, control="arclength", steps=800)
-        _ARCH[key] = 1.25 * scale * float(ref.path.attrs["limit_load_factors"][0])
+        lim = ref.path.attrs["limit_load_factors"]
+        # a thick arch (rise about its thickness) has no limit point: then none may be recorded
+        _ARCH[key] = 1.25 * scale * float(lim[0]) if len(lim) else 0.0
     P = 125.0 * scale
     loads = {n // 2: (0.01 * scale if imperfect else 0.0, -P, 0, 0, 0, 0)}
     res = solve_nonlinear(fr, fixed, loads, control="arclength", steps=steps)
     lim = res.path.attrs["limit_load_factors"]
-    got = P * float(lim[0]) if len(lim) else np.nan
+    got = P * float(lim[0]) if len(lim) else 0.0
     return res, got, _ARCH[key], 0.02 * _ARCH[key]
 
 
