@@ -121,17 +121,17 @@ def arch(slender, plane, steps, imperfect):
     fr = homtex.Frame(nodes, np.c_[np.arange(n), np.arange(1, n + 1)], radius=r, E=E, nu=NU)
     fixed = _planar(n + 1, {0: "all", n: "all"}) if plane else {0: "all", n: "all"}
     EI = E * np.pi * r ** 4 / 4
-    scale = 0.0402 * EI / (E * np.pi * 0.5 ** 4 / 4)            # the limit load scales with EI (shallow arch)
+    scale = 0.0402 * EI / (E * np.pi * 0.5 ** 4 / 4)   # a load scale: the r = 0.5 arch's limit load times EI ratio
     # the first critical load: a limit point, or an asymmetric bifurcation before it (a thin arch);
     # an imperfection turns the bifurcation into a lower limit point, so each has its own reference;
     # a thick arch (rise about its thickness) has none: then none may be recorded
     key = (slender, plane, imperfect)
     lateral = 0.01 * scale if imperfect else 0.0
     if key not in _ARCH:
-        ref = solve_nonlinear(fr, fixed, {n // 2: (1e-2 * lateral, -1.25 * scale, 0, 0, 0, 0)},  # the same ratio
+        ref = solve_nonlinear(fr, fixed, {n // 2: (0.04 * lateral, -5.0 * scale, 0, 0, 0, 0)},  # the same ratio
                               control="arclength", steps=800)
         crit = float(ref.path.attrs["critical_load_factor"])
-        _ARCH[key] = 1.25 * scale * crit if np.isfinite(crit) else 0.0
+        _ARCH[key] = 5.0 * scale * crit if np.isfinite(crit) else 0.0
     P = 125.0 * scale
     res = solve_nonlinear(fr, fixed, {n // 2: (lateral, -P, 0, 0, 0, 0)}, control="arclength",
                           steps=steps)
