@@ -203,3 +203,17 @@ def test_a_very_slender_string_under_load_control_is_settled_not_raised():
     assert -res.u[20, 2] / a == pytest.approx(t, rel=2e-3)
     if res.path.attrs["status"] != "ok":
         assert "descending the potential" in res.path.attrs["status_detail"]
+
+
+def test_an_imperfect_very_slender_column_follows_its_sharp_knee():
+    """L/r = 1e4 with a lateral imperfection of 1e-4 P_cr: the path bends sharply at P_cr (the
+    displacement per load grows a thousandfold), load-control steps fail there, and the nearly
+    singular tangent read as a limit point ("cannot pass 0.667"), though the path has none. It is
+    now followed through the knee by arc length onto the elastica, with no snap recorded."""
+    L = 100.0
+    fr, fixed, Pcr = cantilever_column(10_000, True)
+    res = solve_nonlinear(fr, fixed, {30: (-1.5 * Pcr, 1e-4 * Pcr, 0, 0, 0, 0)}, steps=3)
+    m = brentq(lambda m: (2 * ellipk(m) / np.pi) ** 2 - 1.5, 1e-9, 0.999)
+    assert res.stable and res.load_factor == 1.0
+    assert np.hypot(*res.x[30, 1:]) / L == pytest.approx(2 * np.sqrt(m) / ellipk(m), abs=5e-4)
+    assert len(res.path.attrs["snap_load_factors"]) == 0
