@@ -25,6 +25,7 @@ possibly nonsymmetric matrix). :func:`make_tangent_solver` builds one by name; t
 
 from __future__ import annotations
 
+import abc
 import logging
 import time
 from dataclasses import dataclass
@@ -105,7 +106,7 @@ class SymmetricUpper:
         return out
 
 
-class TangentSolver:
+class TangentSolver(abc.ABC):
     """Base of the tangent solvers (see the module docstring for the protocol).
 
     Subclasses implement :meth:`_analyse`, :meth:`_factor` and :meth:`_solve`; the public methods
@@ -165,14 +166,16 @@ class TangentSolver:
         return x
 
     # -- to implement
-    def _analyse(self, A) -> None:  # pragma: no cover - interface
-        pass
+    def _analyse(self, A) -> None:  # noqa: B027 - an optional hook, not abstract
+        """Analyse the sparsity pattern once (default: nothing to analyse)."""
 
-    def _factor(self, A, inertia: bool) -> None:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _factor(self, A, inertia: bool) -> None:
+        """Factor A (inertia: count its negative eigenvalues into the report)."""
 
-    def _solve(self, b) -> np.ndarray:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _solve(self, b) -> np.ndarray:
+        """x with A x = b from the current factorisation."""
 
 
 def splu_or_raise(A):
