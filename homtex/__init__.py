@@ -2,9 +2,10 @@
 
 Units: mm, N, MPa inside the solver. Node DOFs: ux, uy, uz, rx, ry, rz.
 
-The public API is re-exported here; the stages behind it (periodic homogenisation, contact,
-spacer-fabric geometry, seams, macro layer, studies) are imported on first use, so
-``import homtex`` stays light.
+The public API is re-exported here; everything behind it (the Frame and numpy included, the
+periodic homogenisation, contact, spacer-fabric geometry, seams, macro layer, studies) is
+imported on first use, so ``import homtex`` stays light (no numpy: the ``homtex`` command
+imports its heavy modules inside its own error handling, where an interrupt is one line).
 """
 
 from importlib import import_module
@@ -12,12 +13,13 @@ from importlib import import_module
 from ._version import __version__
 from .config import get_options, set_options
 from .errors import CellError, InputError, SolverError, StrainWarning, StudyError
-from .model.frame import Frame
-from .model.results import StaticResult, Status
-from .model.sections import YarnType
 
 # name -> module that defines it (imported on first use)
 _LAZY = {
+    "Frame": ".model.frame",
+    "StaticResult": ".model.results",
+    "Status": ".model.results",
+    "YarnType": ".model.sections",
     "solve_static": ".api",
     "compress": ".api",
     "LinearSolver": ".linalg.solvers",
@@ -36,10 +38,12 @@ _LAZY = {
     "Lookup": ".lookup",
     "solve_nonlinear": ".api",
     "Corotational": ".analysis.nonlinear",
+    "Lattice": ".contact.lattice",
+    "RestState": ".model.rest",
+    "YarnCompression": ".model.compression",
 }
 
-__all__ = ["CellError", "Frame", "InputError", "SolverError", "StaticResult", "Status", "StrainWarning", "StudyError",
-           "YarnType",
+__all__ = ["CellError", "InputError", "SolverError", "StrainWarning", "StudyError",
            "__version__", "get_options", "set_options", *_LAZY]
 
 

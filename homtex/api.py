@@ -11,17 +11,22 @@ import xarray as xr
 from .analysis.nonlinear import CONTROLS, NonlinearResult
 from .analysis.nonlinear import solve_nonlinear as _solve_frame
 from .analysis.static import solve_linear
-from .config import option
+from .config import option, threads_for
 from .contact.compress import CompressionTest, run_compression
 from .contact.engine import run_engine
 from .contact.incremental import NonlinearSettings
+from .contact.lattice import Lattice
 from .contact.options import Contact
 from .contact.solver import solve_contact
-from .errors import InputError
+from .errors import InputError, SolverError
 from .fem.assembly import Assembler
+from .linalg.solvers import SINGULAR
 from .model.arrays import as_real
 from .model.frame import Frame
+from .model.rest import RestState
 from .model.results import StaticResult
+from .model.scene import Scene
+from .model.topology import singular_diagnosis
 from .validate import check_choice, check_int, check_number
 
 __all__ = ["compress", "solve_nonlinear", "solve_static"]
@@ -48,21 +53,45 @@ def solve_static(frame: Frame, fixed=None, loads=None, *, solver: str | None = N
 
     Raises
     ------
-    InputError for bad supports/loads; SolverError for unheld parts or a failed solve.
+    InputError for bad supports/loads; SolverError for unheld parts or a failed solve; a singular
+    stiffness matrix (from any solver, AMG's coarse grid included) names the parts nothing holds
+    and the elements of almost no stiffness.
     """
     if not isinstance(frame, Frame):
         raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
-    if contact is not None:
-        return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
-                             maxiter=maxiter, assembler=assembler, **contact_options)
-    if contact_options:
+    if contact_options and contact is None:
         raise InputError(f"unknown options {sorted(contact_options)}")
-    return solve_linear(frame, fixed, loads, solver=solver, tol=tol, maxiter=maxiter, assembler=assembler)
+    try:
+        with threads_for(frame.ndof):     # one numba thread for a small frame (homtex.config)
+            if contact is not None:
+                return solve_contact(frame, fixed, loads, contact=contact, solver=solver, tol=tol,
+                                     maxiter=maxiter, assembler=assembler, **contact_options)
+            return solve_linear(frame, fixed, loads, solver=solver, tol=tol, maxiter=maxiter, assembler=assembler)
+    except SolverError as err:
+        if not any(w in str(err) for w in (SINGULAR, "singular", "not positive definite")):
+            raise
+        hint = _singular_hint(frame, None if contact is not None else fixed, loads)
+        if not hint:
+            raise
+        raise SolverError(f"{err}\nIn this frame:\n{hint}", history=err.history, report=err.report) from err
+
+
+def _singular_hint(frame, fixed, loads) -> str:
+    """The frame's diagnosis of a singular stiffness matrix (:func:`homtex.model.topology.singular_diagnosis`):
+    unheld parts (without contact: the supports alone must hold every part) and elements of almost
+    no stiffness."""
+    mask = None
+    if fixed is not None:
+        try:
+            mask = Scene.build(frame, fixed, loads).mask
+        except InputError:
+            mask = None
+    return singular_diagnosis(frame, mask)
 
 
 def _frame_of(obj):
     if isinstance(obj, Frame):
-        return obj, None, {}, None
+        return obj, None, {"validity": {}}, None
     fr = getattr(obj, "frame", None)
     if not isinstance(fr, Frame):
         raise InputError(f"compress needs a homtex.Frame or an object with a .frame (a homtex Cell), "
@@ -70,6 +99,10 @@ def _frame_of(obj):
     groups = getattr(obj, "groups", None)
     info = getattr(obj, "info", None) or {}
     spec = getattr(obj, "friction_spec", None)
+    validity = dict(getattr(obj, "validity", None) or {})
+    if validity.get("mesh_cell") and hasattr(obj, "fabric_fingerprint"):
+        validity["mesh_matches"] = obj.fabric_fingerprint() == validity["mesh_cell"]
+    info = dict(info, validity=validity)
     return fr, groups, info, spec
 
 
@@ -77,6 +110,9 @@ def _targets(v, steps, name):
     arr = np.atleast_1d(as_real(v, name))
     if arr.ndim != 1 or arr.size > 100_000:
         raise InputError(f"{name} must be a number or a 1-D array of at most 100000 levels, got shape {arr.shape}")
+    if arr.size == 0:
+        raise InputError(f"{name} must be a number or a non-empty array of levels, got an empty array (a curve "
+                         "needs at least one level)")
     if arr.size == 1:
         if not (np.isfinite(arr[0]) and arr[0] > 0):
             raise InputError(f"{name} must be positive, got {v!r}")
@@ -114,6 +150,10 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         else the x-y bounding box of the yarns).
     solver, tol : linear solver and tolerance (default: options ``compress_solver`` ("direct")
         and ``tol``).
+    maxiter : iteration limit, an integer >= 1: with ``geometry="linear"`` of the iterative linear
+        solves (``solver="amg"`` or ``"cg"``; default 1000 and 5000); with ``geometry="nonlinear"``
+        the large-motion engine's Newton iterations per friction round of a step (default 80;
+        :class:`homtex.contact.incremental.NonlinearSettings` ``max_iter``).
     max_cuts : a step whose contact iteration fails (cycling active set, penetration, solver
         failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
         1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
@@ -156,6 +196,8 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     elif callable(spec) and contact.friction is None:
         friction_spec = spec()
     max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=30)
+    if maxiter is not None:
+        maxiter = check_int(maxiter, "maxiter", ge=1, le=10 ** 6)
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
         raise InputError(f"progress must be True or False, got {progress!r}")
     if thickness is not None:
@@ -179,9 +221,16 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         if strain is not None:
             raise InputError("compress: 'strain' is for control='displacement'; force control takes 'pressure'")
         targets = _targets(pressure, steps, "pressure")
-    return run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
+    ds = run_compression(test, targets, control=control, contact=contact, solver=option("compress_solver", solver),
                            tol=option("tol", tol), maxiter=maxiter, max_cuts=int(max_cuts),
-                           progress=option("progress", progress), geometry=geometry, friction_spec=friction_spec)
+                           progress=option("progress", progress), geometry=geometry, friction_spec=friction_spec,
+                           validity=info.get("validity"))
+    v = info.get("validity") or {}
+    ds.attrs["mesh_convergence"] = (
+        v["mesh_convergence"] if v.get("mesh_matches") else
+        "not shown for this cell: its resolution or fabric differs from the one the cell file's mesh convergence "
+        "was shown on" if v.get("mesh_cell") else "not shown for this cell (no [validity] mesh_convergence)")
+    return ds
 
 
 def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = None, plates=None,
@@ -189,7 +238,7 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
                     steps: int = 10, tol: float | None = None, atol: float | None = None, max_iter: int | None = None,
                     max_cuts: int | None = None, geometric: str = "full", solver: str | None = None,
                     perturbation: float = 1e-2, arc_length: float | None = None, monitor=None,
-                    progress: bool | None = None) -> NonlinearResult:
+                    progress: bool | None = None, rest=None, lattice=None) -> NonlinearResult:
     """Large-rotation static solve of a frame, following the load path; with ``contact`` the
     large-motion engine (yarns that touch, slide with friction and never pass through each other).
 
@@ -232,6 +281,13 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
     monitor : node indices whose displacements and forces the path records (default: the loaded
         nodes and those with prescribed motions).
     progress : progress reports of the engine (default: option ``progress``).
+    rest : a :class:`homtex.RestState` (engine): the yarns' stress-free shape when it is not the
+        frame's geometry, e.g. ``homtex.model.rest.straight_rest(frame)`` for knitted loops of a
+        straight yarn; strain energies and their split count from it.
+    lattice : a :class:`homtex.Lattice` (engine, periodic frames): lattice vectors as unknowns,
+        held, prescribed (``motion``, mm at lambda = 1: a macro stretch) or free (zero average
+        force: free lateral contraction, a cell relaxing to its own size), with dead forces on
+        free components (``force``, N); the path records ``periods`` and ``lattice_force``.
 
     Returns
     -------
@@ -253,16 +309,17 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
         raise InputError(f"frame must be a homtex.Frame or a homtex Cell, got {type(frame).__name__}")
     if initial is not None and not isinstance(initial, NonlinearResult):
         raise InputError(f"initial must be the NonlinearResult of an earlier solve, got {type(initial).__name__}")
-    engine = contact is not None or plates is not None or prestrain is not None or \
-        (initial is not None and initial.state is not None)
+    engine = contact is not None or plates is not None or prestrain is not None or rest is not None or \
+        lattice is not None or (initial is not None and initial.state is not None)
     if not engine:
         if initial is not None:
             raise InputError("initial: this result comes from a solve without contact, which cannot be continued; "
                              "continue solves of the large-motion engine (contact=homtex.Contact())")
-        return _solve_frame(fr, fixed, loads, control=control, steps=steps, tol=1e-9 if tol is None else tol,
-                            atol=atol, max_iter=15 if max_iter is None else max_iter,
-                            max_cuts=10 if max_cuts is None else max_cuts, geometric=geometric, solver=solver,
-                            perturbation=perturbation, arc_length=arc_length, monitor=monitor)
+        with threads_for(fr.ndof):
+            return _solve_frame(fr, fixed, loads, control=control, steps=steps, tol=1e-9 if tol is None else tol,
+                                atol=atol, max_iter=15 if max_iter is None else max_iter,
+                                max_cuts=10 if max_cuts is None else max_cuts, geometric=geometric, solver=solver,
+                                perturbation=perturbation, arc_length=arc_length, monitor=monitor)
     contact = Contact() if contact is None else contact
     if not isinstance(contact, Contact):
         raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
@@ -295,6 +352,12 @@ def solve_nonlinear(frame, fixed=None, loads=None, *, contact: Contact | None = 
             raise InputError(f"monitor must be node indices in 0..{fr.n_nodes - 1}, got {monitor!r}")
     spec = getattr(cell, "friction_spec", None) if cell is not None else None
     friction_spec = spec() if callable(spec) and contact.friction is None else None
-    return run_engine(fr, fixed, loads, contact=contact, plates=plates, steps=steps, prestrain=prestrain,
-                      initial=None if initial is None else initial.state, friction_spec=friction_spec,
-                      max_cuts=max_cuts, settings=settings, monitor=monitor, progress=option("progress", progress))
+    if lattice is not None and not isinstance(lattice, Lattice):
+        raise InputError(f"lattice must be a homtex.Lattice, got {type(lattice).__name__}")
+    if rest is not None and not isinstance(rest, RestState):
+        raise InputError(f"rest must be a homtex.RestState, got {type(rest).__name__}")
+    with threads_for(fr.ndof):
+        return run_engine(fr, fixed, loads, contact=contact, plates=plates, steps=steps, prestrain=prestrain,
+                          initial=None if initial is None else initial.state, friction_spec=friction_spec,
+                          max_cuts=max_cuts, settings=settings, monitor=monitor,
+                          progress=option("progress", progress), rest=rest, lattice=lattice)

@@ -48,7 +48,7 @@ import numpy as np
 from .errors import CellError, InputError
 from .model.frame import Frame
 from .model.sections import DEFAULT_STRAIN_LIMIT, YarnType
-from .validate import check_keys, get_list, get_number, get_str, get_table, type_name
+from .validate import check_keys, get_list, get_number, get_str, get_table, read_data_file, type_name
 
 try:
     import tomllib
@@ -69,7 +69,8 @@ GENERATORS: dict[str, str] = {
     "spacer": "homtex.geometry.spacer:build_cell",
 }
 
-TABLES = ("cell", "parameters", "yarns", "resolution", "contact")
+TABLES = ("cell", "parameters", "yarns", "resolution", "contact", "validity")
+VALIDITY_KEYS = ("linear_strain_limit", "source", "mesh_convergence", "mesh_cell")
 CONTACT_KEYS = ("friction", "plate_friction", "pairs")
 #: largest friction coefficient a cell file may give
 MAX_FRICTION = 10.0
@@ -154,6 +155,25 @@ def _resolve(generator: str, file):
                         file=file, table="cell", key="generator") from exc
 
 
+def _validity(d: dict) -> dict:
+    """The ``[validity]`` table: ``linear_strain_limit`` (the compression strain up to which the
+    linear model's stress stays within 10 % of the large-motion engine's, measured by
+    studies/verification/linear_validity.py) and its ``source``; ``mesh_convergence`` (what a
+    convergence study showed for the cell's resolution) and ``mesh_cell`` (the fabric fingerprint of
+    the cell it was shown on: another resolution or fabric is not covered by it)."""
+    check_keys(d, VALIDITY_KEYS, "validity")
+    out = {}
+    lim = get_number(d, "linear_strain_limit", "validity", gt=0.0, lt=1.0, required=False)
+    if lim is not None:
+        out["linear_strain_limit"] = lim
+        out["source"] = get_str(d, "source", "validity", default="the cell file's [validity] table")
+    conv = get_str(d, "mesh_convergence", "validity", default="")
+    if conv:
+        out["mesh_convergence"] = conv
+        out["mesh_cell"] = get_str(d, "mesh_cell", "validity")
+    return out
+
+
 # ----------------------------------------------------------------------------------
 class Cell:
     """A validated unit cell: its generator, parameters, yarn types and resolution.
@@ -167,6 +187,8 @@ class Cell:
     frame : Frame, built by the generator on first access and cached
     groups : dict name -> (m,) bool element mask (from the generator, may be empty)
     info : dict of further generator output (e.g. "thickness", mm)
+    validity : dict from the ``[validity]`` table ({"linear_strain_limit": strain, "source": str,
+        "mesh_convergence": str, "mesh_cell": fingerprint}; empty when the file has none)
     """
 
     def __init__(self, data: dict, path=None):
@@ -178,7 +200,7 @@ class Cell:
             for key in data:
                 if key not in TABLES:
                     raise CellError(f"unknown table [{key}]; a cell file has [cell], [parameters], "
-                                    f"[yarns.<name>], [resolution] and [contact]", table=key)
+                                    f"[yarns.<name>], [resolution], [contact] and [validity]", table=key)
             cell = get_table(data, "cell", "")
             check_keys(cell, CELL_KEYS, "cell")
             self.name = get_str(cell, "name", "cell")
@@ -191,6 +213,7 @@ class Cell:
             self.yarns = {name: _yarn(name, d) for name, d in yarns.items()}
             self.resolution = copy.deepcopy(get_table(data, "resolution", "", required=False))
             self.contact = _contact(get_table(data, "contact", "", required=False), self.yarns)
+            self.validity = _validity(get_table(data, "validity", "", required=False))
         except CellError as err:
             err.file = err.file or f
             raise
@@ -295,6 +318,7 @@ class Cell:
         data.pop("cell", None)
         data.get("parameters", {}).pop("seam", None)
         data.pop("contact", None)             # friction is not what a layer rigidity was calibrated on
+        data.pop("validity", None)            # what was measured on the fabric is not part of it
         for y in data.get("yarns", {}).values():
             if isinstance(y, dict):
                 y.pop("source", None)
@@ -417,18 +441,18 @@ def load_cell(path: str | Path, *, build: bool = True) -> Cell:
 
     Raises
     ------
-    CellError (an InputError) naming the file, table and key of the culprit.
+    CellError (an InputError) naming the file, table and key of the culprit; also for a path that
+    is not a regular file (a device such as ``/dev/zero``, a pipe) or a file over 10 MB
+    (:data:`homtex.validate.MAX_FILE_BYTES`), refused before it is read.
     """
     if not isinstance(build, (bool, np.bool_)):
         raise CellError(f"build must be True or False, got {build!r}")
     p = find_cell(path)
     try:
-        text = p.read_bytes().decode("utf-8")
+        text = read_data_file(p, error=CellError, what="a cell file (.toml)")
     except FileNotFoundError:
         raise CellError(f"no such file, and no shipped cell of that name (shipped cells: {', '.join(shipped_cells())})",
                         file=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CellError(f"cannot read: {exc}", file=path) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -29,6 +29,7 @@ import numpy as np
 
 from .errors import InputError
 from .output.io import read_netcdf, write_netcdf
+from .validate import check_choice
 
 __all__ = ["Lookup"]
 
@@ -51,8 +52,7 @@ def _rbf_fit(pts, y, kernel, smoothing, degree):
     pts (n, d) in the unit box, y (n, k). Returns (coef (n + 1 + d, k), tail flag array) where
     the tail is [1, x_1 .. x_d] for degree 1 and [1] for degree 0.
     """
-    if kernel not in _KERNELS:
-        raise InputError(f"Lookup: kernel must be one of {sorted(_KERNELS)}, got {kernel!r}")
+    check_choice(kernel, "Lookup: kernel", sorted(_KERNELS))
     need = _MIN_DEGREE[kernel]
     deg = need if degree is None else int(degree)
     if deg < need or deg > 1:
@@ -156,8 +156,7 @@ class Lookup:
             for n, a in zip(self.names, self.axes):
                 if a.ndim != 1 or a.size < 2 or not np.all(np.diff(a) > 0):
                     raise InputError(f"Lookup: axis {n!r} must be strictly increasing with >= 2 nodes, got {a}")
-            if method not in ("linear", "cubic"):
-                raise InputError(f"Lookup: grid method must be 'linear' or 'cubic', got {method!r}")
+            check_choice(method, "Lookup: grid method", ("linear", "cubic"))
             if method == "cubic":
                 for n, a in zip(self.names, self.axes):
                     if a.size < 4:

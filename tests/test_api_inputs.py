@@ -9,6 +9,7 @@ import math
 import warnings
 
 import numpy as np
+import pytest
 
 import homtex
 
@@ -87,3 +88,107 @@ def test_every_bad_argument_is_refused_by_name_or_valid():
                         OPTIONS.update(before)
     assert raw == [], "\n".join(map(str, raw))
     assert counts["named"] > 900 and counts["accepted"] < 100, counts
+
+
+# ------------------------------------------------------------------ options changed after construction
+@pytest.mark.parametrize("name, value", [("friction", -5), ("friction", math.nan), ("plate_friction", 11.0),
+                                         ("strategy", "magic"), ("max_iter", 2.5), ("penalty", -1.0),
+                                         ("reuse_amg", 1), ("barrier_gap", 0.9), ("fricton", 0.2)])
+def test_contact_options_are_checked_on_assignment(name, value):
+    """``c = Contact(); c.friction = -5`` ran frictionless with status "ok": every assignment is
+    checked like the constructor's argument (and a misspelt option is refused, not added)."""
+    c = homtex.Contact()
+    before = homtex.Contact()
+    with pytest.raises(homtex.InputError, match=name):
+        setattr(c, name, value)
+    assert c == before                     # nothing changed
+    c.friction = 0.3                       # a valid value is taken, converted like the constructor's
+    assert c.friction == 0.3 and c.has_friction and c == homtex.Contact(friction=0.3)
+
+
+def test_every_contact_option_has_a_check():
+    import dataclasses
+
+    from homtex.contact.options import _CHECKS
+
+    assert set(_CHECKS) == {f.name for f in dataclasses.fields(homtex.Contact)}
+
+
+def test_plate_fields_are_checked_on_assignment():
+    p = homtex.Plate(z=0.0, displacement=1.0)
+    for name, value, match in [("z", math.nan, "Plate.z"), ("normal", 2, "Plate.normal"),
+                               ("force", 5.0, "either 'displacement'"), ("pressure", 3.0, "area"),
+                               ("displacement", math.inf, "Plate.displacement"), ("name", 3, "Plate.name"),
+                               ("heigth", 1.0, "no attribute 'heigth'")]:
+        with pytest.raises(homtex.InputError, match=match):
+            setattr(p, name, value)
+        assert p == homtex.Plate(z=0.0, displacement=1.0), name
+    p.displacement = None                  # switching to force control: one at a time
+    p.force = 5.0
+    assert p.force_controlled and p.force == 5.0
+    q = homtex.Plate(z=0.0, pressure=10.0, area=100.0)
+    q.area = 200.0                         # the force follows pressure x area
+    assert q.force == pytest.approx(2.0)
+    q.force = 1.0                          # a force given directly replaces the pressure
+    assert (q.force, q.pressure, q.area) == (1.0, None, None)
+
+
+# ------------------------------------------------------------------ compress: maxiter and levels
+def test_nonlinear_compress_checks_and_uses_maxiter():
+    """compress(geometry="nonlinear") ignored maxiter: it is checked (an integer >= 1) and is the
+    engine's Newton iteration limit."""
+    spacer = homtex.load_cell("spacer_20mm")
+    for bad in (0, 2.5, -1, True, "10"):
+        with pytest.raises(homtex.InputError, match="maxiter"):
+            homtex.compress(spacer, strain=0.05, steps=1, geometry="nonlinear", maxiter=bad)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = homtex.compress(spacer, strain=0.05, steps=1, geometry="nonlinear", maxiter=2, max_cuts=0)
+    assert ds.attrs["status"] == "failed" and "did not converge in 2 iterations" in ds.attrs["status_detail"]
+
+
+@pytest.mark.parametrize("kw", [{"strain": []}, {"strain": np.array([])}, {"control": "force", "pressure": []}])
+def test_compress_refuses_empty_levels(kw):
+    """compress(strain=[]) returned an empty curve with status "ok"."""
+    name = "pressure" if "pressure" in kw else "strain"
+    with pytest.raises(homtex.InputError, match=rf"{name} must be a number or a non-empty array"):
+        homtex.compress(homtex.load_cell("square").frame, **kw)
+
+
+# ------------------------------------------------------------------ arrays for string options
+ARRAYS = [np.array([1, 2]), np.array(["amg", "direct"]), np.array(["amg"]), np.array("amg"), ["amg"]]
+
+
+@pytest.mark.parametrize("value", ARRAYS, ids=repr)
+@pytest.mark.parametrize("name", ["static_solver", "homogenize_solver", "compress_solver", "nonlinear_solver"])
+def test_string_options_refuse_arrays_by_name(name, value):
+    """``set_options(static_solver=np.array([1, 2]))`` raised a raw ValueError (``v in SOLVERS``
+    on an array); a one-element array was accepted and stored."""
+    from homtex.config import OPTIONS
+
+    before = dict(OPTIONS)
+    with pytest.raises(homtex.InputError, match=name):
+        homtex.set_options(**{name: value})
+    assert OPTIONS == before
+    with homtex.set_options(**{name: np.str_(before[name])}):   # a numpy string is a string
+        assert type(homtex.get_options()[name]) is str
+
+
+@pytest.mark.parametrize("value", ARRAYS, ids=repr)
+def test_choice_arguments_refuse_arrays_by_name(value):
+    from homtex.validate import check_choice
+
+    nodes = np.c_[np.linspace(0, 10, 5), np.zeros(5), np.zeros(5)]
+    fr = homtex.Frame(nodes, np.c_[np.arange(4), np.arange(1, 5)], radius=0.5, E=1000.0, nu=0.3)
+    sq = homtex.load_cell("square").frame
+    with pytest.raises(homtex.InputError, match="solver"):
+        check_choice(value, "solver", ("amg", "direct", "cg"))
+    with pytest.raises(homtex.InputError, match="solver"):
+        homtex.solve_static(fr, {0: "all"}, {4: (0, 0, -1, 0, 0, 0)}, solver=value)
+    with pytest.raises(homtex.InputError, match="solver"):
+        homtex.homogenize(sq, solver=value)
+    for arg in ("solver", "control", "geometry"):
+        with pytest.raises(homtex.InputError, match=arg):
+            homtex.compress(sq, strain=0.1, **{arg: value})
+    with pytest.raises(homtex.InputError, match="method"):
+        homtex.Lookup.from_grid({"a": np.arange(3.0)}, np.arange(3.0), method=value)

@@ -216,3 +216,49 @@ def test_replace_and_attrs(tmp_path):
     assert cell.parameters["h"] == 1.2
     again = Cell(cell.to_dict(), path="memory")
     assert again.frame.n_elements == cell.frame.n_elements
+
+
+def test_endless_or_huge_files_are_refused_before_reading(tmp_path):
+    """A cell path to a device that never ends (/dev/zero) or a file over the 10 MB limit is a
+    CellError naming the file, before anything is read (reading /dev/zero filled the memory)."""
+    from homtex.validate import MAX_FILE_BYTES
+
+    if Path("/dev/zero").exists():
+        with pytest.raises(CellError, match="not a regular file") as info:
+            load_cell("/dev/zero")
+        assert info.value.file == "/dev/zero"
+    big = tmp_path / "big.toml"
+    with open(big, "wb") as fh:          # sparse: no disk space or time spent
+        fh.truncate(MAX_FILE_BYTES + 1)
+    with pytest.raises(CellError, match=r"larger than the 10.5 MB") as info:
+        load_cell(big)
+    assert info.value.file == str(big)
+    ok = write(tmp_path, GOOD)           # the limit leaves ordinary files alone
+    assert load_cell(ok).frame.n_elements > 0
+
+
+@pytest.mark.parametrize("old, new, key", [
+    ("h = 1.2", "h = 1" + "0" * 400, "h"),
+    ("theta = -25.0", "theta = -25.0\nrepeat = [100000000000000000000, 1]", "repeat"),
+])
+def test_integers_beyond_64_bits_are_cell_errors(tmp_path, old, new, key):
+    """TOML integers have no size limit in tomllib: one beyond double precision (float() raised
+    OverflowError) or beyond int64 in an integer array (numpy raised OverflowError) is a CellError
+    naming the file, table and key."""
+    p = write(tmp_path, GOOD.replace(old, new))
+    with pytest.raises(CellError) as info:
+        load_cell(p)
+    assert (info.value.file, info.value.table, info.value.key) == (str(p), "parameters", key)
+    assert len(str(info.value)) < 400          # the 400 digits are not repeated in the message
+
+
+def test_a_value_where_a_table_belongs_is_a_cell_error(tmp_path):
+    """``[parameters] seam = "x"`` raised AttributeError ('str' object has no attribute 'get')."""
+    text = (CELLS / "spacer_20mm.toml").read_text()
+    start, end = text.index("[parameters.seam]"), text.index("[parameters.bars.top_pillar]")
+    p = tmp_path / "spacer.toml"
+    p.write_text((text[:start] + text[end:]).replace("thickness = 20.0", 'thickness = 20.0\nseam = "x"', 1))
+    with pytest.raises(CellError) as info:
+        load_cell(p)
+    assert (info.value.file, info.value.table, info.value.key) == (str(p), "parameters", "seam")
+    assert "must be a table" in str(info.value)

@@ -37,7 +37,10 @@ def test_run_quick_writes_the_paper_study(tmp_path):
         assert float(ds["max_difference"].max()) < 1e-7    # amg, direct and cg agree
     with xr.open_dataset(tmp_path / "unseamed_compression.nc") as ds:
         s = ds.stress.sel(strain=slice(0, 0.3)).values
-        assert ds.attrs["status"] == "ok" and (np.diff(s) > 0).all()   # stiff, monotone to 30 %
+        assert (np.diff(s) > 0).all()                                   # stiff, monotone to 30 %
+        # the linear model beyond its measured validity is flagged, naming the limit and the remedy
+        assert ds.attrs["status"] == "flagged"
+        assert "0.0018" in ds.attrs["status_detail"] and "nonlinear" in ds.attrs["status_detail"]
         assert ds.attrs["force_drop_max"] == 0.0                       # and beyond: no snap, no step artefact
     with xr.open_dataset(tmp_path / "cushions.nc") as ds:
         # the foundation model is calibrated on 24 mm: it reproduces 14.33 mm there
@@ -405,3 +408,75 @@ def test_compress_with_the_large_motion_engine_and_friction(tmp_path, capsys):
     assert main(["compress", spacer, "--friction", "0.2", "--out", str(tmp_path / "lin")]) == 2
     assert "--geometry nonlinear" in capsys.readouterr().err
     assert not (tmp_path / "lin" / "spacer_20mm_compression.nc").exists()
+
+
+# ------------------------------------------------------------------ interrupts, empty --out, status
+def test_the_command_imports_its_heavy_modules_inside_main():
+    """Ctrl-C while numpy, numba, scipy, xarray load printed a traceback: the command's module
+    imports none of them, so the interrupt reaches main()'s handler."""
+    code = ("import sys, homtex.app.cli; "
+            "print(sorted(m for m in ('numpy', 'numba', 'scipy', 'xarray') if m in sys.modules))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(__file__).parents[1])
+    assert p.returncode == 0 and p.stdout.strip() == "[]", p.stdout + p.stderr
+
+
+def test_an_interrupt_while_the_modules_load_is_one_line(capsys, monkeypatch):
+    import importlib.abc
+
+    class Interrupt(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            if name == "homtex.app.commands":
+                raise KeyboardInterrupt
+            return None
+
+    monkeypatch.delitem(sys.modules, "homtex.app.commands", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Interrupt(), *sys.meta_path])
+    assert main(["cell", "square"]) == 130
+    err = capsys.readouterr().err
+    assert err == "homtex cell: interrupted\n"
+
+
+def test_an_empty_out_is_a_usage_error(tmp_path, capsys, monkeypatch):
+    """``--out ""`` fell back to the default folder and exited 0."""
+    monkeypatch.chdir(tmp_path)
+    for args in (["cell", "square"], ["compress", "spacer_20mm"], ["plot", "x.nc"], ["study", "s.toml"]):
+        assert main([*args, "--out", ""]) == 2, args
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--out ''" in err and "empty" in err, err
+    assert list(tmp_path.iterdir()) == []        # nothing written
+
+
+def _fake_compress(status, detail):
+    """compress() that computes a short real curve and marks it ``status``."""
+    import homtex
+    from homtex.model.results import set_status
+
+    def fake(cell, **kw):
+        ds = homtex.compress(cell, strain=0.04, steps=2)
+        return set_status(ds, status, detail)
+    return fake
+
+
+@pytest.mark.parametrize("status, code", [("failed", 1), ("flagged", 0), ("ok", 0)])
+def test_a_failed_curve_exits_non_zero_and_keeps_its_files(tmp_path, capsys, monkeypatch, status, code):
+    """``homtex compress`` exited 0 for a curve whose status is "failed": now 1, with the reason on
+    stderr and the files written; "flagged" prints a warning line and exits 0."""
+    import homtex.app.stages as stages
+
+    detail = "failed at step 17 (strain 0.64): a step too large" if status != "ok" else ""
+    monkeypatch.setattr(stages, "compress", _fake_compress(status, detail))
+    out = tmp_path / status
+    if code:
+        with pytest.raises(SystemExit) as info:
+            main(["compress", "spacer_20mm", "--out", str(out)])
+        assert info.value.code == code
+    else:
+        assert main(["compress", "spacer_20mm", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert (out / "spacer_20mm_compression.nc").is_file() and (out / "spacer_20mm_compression.png").is_file()
+    if status == "failed":
+        assert err.strip() == f"homtex compress: failed: {detail} (what was computed before it is written)"
+    elif status == "flagged":
+        assert err.strip() == f"homtex compress: warning: the result is flagged: {detail}"
+    else:
+        assert "failed" not in err and "warning" not in err

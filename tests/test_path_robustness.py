@@ -157,3 +157,63 @@ def test_arc_length_driven_by_a_prescribed_motion_does_not_depend_on_the_step_co
     assert float(np.abs(p.max_axial_strain).max()) < 0.05
     ref = solve_nonlinear(fr, fixed, None, control="arclength", steps=200, tol=1e-10)
     assert np.abs(res.x - ref.x).max() < 1e-6
+
+
+@pytest.mark.parametrize("steps", [1, 2, 5])
+def test_a_stiffening_string_under_load_control_reaches_the_membrane_answer(steps):
+    """A slender clamped-clamped rod (L/r = 2000) under a central transverse load carries it as a
+    string: F = 2 EA (sqrt(1 + t^2) - 1) t / sqrt(1 + t^2), t = w / a (bending adds 0.1 %). Its
+    flat start's tangent sees bending only, so the first predictor overshoots the answer ~1000x and
+    a long step's work misses its energy: the cut retries once failed for every step count (a
+    rejected step's rate capped the shorter ones), now each count ends on the string's deflection."""
+    a, r = 50.0, 0.05
+    fr = line_frame(40, 2 * a, (1, 0, 0), radius=r, E=E, nu=NU)
+    EA = E * np.pi * r ** 2
+    w = 5.0
+    t = w / a
+    F = 2 * EA * (np.sqrt(1 + t * t) - 1) * t / np.sqrt(1 + t * t)
+    res = solve_nonlinear(fr, {0: "all", 40: "all"}, {20: (0, 0, -F, 0, 0, 0)}, steps=steps)
+    assert res.path.attrs["status"] == "ok" and res.stable
+    assert -res.u[20, 2] == pytest.approx(w, rel=3e-3)
+
+
+def test_a_round_slender_column_regaining_stability_by_two_eigenvalues_in_one_arc():
+    """3D, L/r = 1000, one load step to 1.5 P_cr: on the secondary branch an arc passes the double
+    eigenvalue back (stability regained by two at once); the check of a multiple eigenvalue asked
+    for zero eigenvalues there and raised a bare ValueError. Now the tip sits on the elastica."""
+    L = 100.0
+    fr, fixed, Pcr = cantilever_column(1000, False)
+    res = solve_nonlinear(fr, fixed, {30: (-1.5 * Pcr, 0, 0, 0, 0, 0)}, steps=1)
+    m = brentq(lambda m: (2 * ellipk(m) / np.pi) ** 2 - 1.5, 1e-9, 0.999)
+    tip = res.x[30] - [L, 0, 0]
+    assert res.stable and np.hypot(tip[1], tip[2]) / L == pytest.approx(2 * np.sqrt(m) / ellipk(m), abs=5e-4)
+
+
+def test_a_very_slender_string_under_load_control_is_settled_not_raised():
+    """L/r = 1e4: from the flat start Newton fails at every step size (the first predictor turns
+    elements by 3 rad; smaller steps need more than max_iter iterations): the potential is descended
+    to the stable state instead, the string's membrane deflection (bending adds 1e-5), and the path
+    is flagged only where the step's work could not be verified."""
+    a, r = 50.0, 0.01
+    fr = line_frame(40, 2 * a, (1, 0, 0), radius=r, E=E, nu=NU)
+    t = 0.1
+    F = 2 * E * np.pi * r ** 2 * (np.sqrt(1 + t * t) - 1) * t / np.sqrt(1 + t * t)
+    res = solve_nonlinear(fr, {0: "all", 40: "all"}, {20: (0, 0, -F, 0, 0, 0)}, steps=1)
+    assert res.stable and res.load_factor == 1.0
+    assert -res.u[20, 2] / a == pytest.approx(t, rel=2e-3)
+    if res.path.attrs["status"] != "ok":
+        assert "descending the potential" in res.path.attrs["status_detail"]
+
+
+def test_an_imperfect_very_slender_column_follows_its_sharp_knee():
+    """L/r = 1e4 with a lateral imperfection of 1e-4 P_cr: the path bends sharply at P_cr (the
+    displacement per load grows a thousandfold), load-control steps fail there, and the nearly
+    singular tangent read as a limit point ("cannot pass 0.667"), though the path has none. It is
+    now followed through the knee by arc length onto the elastica, with no snap recorded."""
+    L = 100.0
+    fr, fixed, Pcr = cantilever_column(10_000, True)
+    res = solve_nonlinear(fr, fixed, {30: (-1.5 * Pcr, 1e-4 * Pcr, 0, 0, 0, 0)}, steps=3)
+    m = brentq(lambda m: (2 * ellipk(m) / np.pi) ** 2 - 1.5, 1e-9, 0.999)
+    assert res.stable and res.load_factor == 1.0
+    assert np.hypot(*res.x[30, 1:]) / L == pytest.approx(2 * np.sqrt(m) / ellipk(m), abs=5e-4)
+    assert len(res.path.attrs["snap_load_factors"]) == 0

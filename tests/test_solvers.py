@@ -178,3 +178,28 @@ def test_singular_factorisation_is_a_solver_error():
     A = sp.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
     with pytest.raises(homtex.SolverError, match="singular"):
         LinearSolver(A, method="direct").solve(np.ones(2))
+
+
+def test_amg_on_a_singular_matrix_is_a_solver_error():
+    """pyamg factorises its coarse grid inside the first V-cycle: a singular matrix escaped as a bare
+    RuntimeError ("Factor is exactly singular")."""
+    import scipy.sparse as sp
+
+    from homtex.linalg.solvers import LinearSolver
+
+    A = sp.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
+    with pytest.raises(homtex.SolverError, match="coarse-grid factorisation.*singular"):
+        LinearSolver(A, method="amg").solve(np.ones(2))
+
+
+@pytest.mark.parametrize("solver", ["amg", "direct", "cg"])
+def test_an_element_of_no_stiffness_is_named(solver):
+    """A frame whose stiffness matrix is singular although every part is supported (an element of
+    E = 1e-300 MPa among 1000 MPa ones): a SolverError naming the element, with every solver."""
+    nodes = np.c_[np.linspace(0, 10, 5), np.zeros(5), np.zeros(5)]
+    fr = homtex.Frame(nodes, np.c_[np.arange(4), np.arange(1, 5)], radius=0.5, E=np.array([1e3, 1e3, 1e-300, 1e3]),
+                      nu=0.3)
+    with pytest.raises(homtex.SolverError, match=r"element 2 \(yarn 0, nodes \[2, 3\]\) has almost no stiffness"):
+        homtex.solve_static(fr, {0: "all"}, {4: (0, 0, -1.0, 0, 0, 0)}, solver=solver)
+    ok = homtex.solve_static(fr.with_(E=np.full(4, 1e3)), {0: "all"}, {4: (0, 0, -1.0, 0, 0, 0)}, solver=solver)
+    assert np.isfinite(ok.u).all()

@@ -136,8 +136,18 @@ def curve(cell):
     return homtex.compress(cell, strain=0.3, steps=10, contact=PENALTY)
 
 
+def linear_beyond_validity(ds) -> bool:
+    """A linear curve past the linear model's range (the cell's measured limit, or small rotations for
+    a plain frame): complete, flagged for that reason."""
+    detail = ds.attrs.get("status_detail", "")
+    return ds.attrs["status"] == "flagged" and ("the linear model holds on this cell" in detail or
+                                                "small-rotation beams" in detail)
+
+
 def test_compression_monotone_and_linear_range(curve):
-    assert curve.attrs["status"] == "ok"
+    # the linear model itself (what this test checks) goes to 30 %; the cell's measured validity of
+    # that model ends far below, so the curve is flagged for it
+    assert linear_beyond_validity(curve)
     s = curve.stress.values
     e = curve.strain.values
     assert np.all(np.diff(s) > 0)
@@ -171,20 +181,22 @@ def test_supercell_gives_same_stress(cell, curve):
                        ref=np.tile(fr.R[:, 1], (2, 1)), periods=np.array([2 * P[0], P[1]]), images=np.vstack(im2),
                        contact_radius=np.tile(fr.contact_radius, 2))
     c2 = homtex.compress(fr2, strain=0.3, steps=10, contact=PENALTY, thickness=20.0)
-    assert c2.attrs["status"] == "ok"
+    assert linear_beyond_validity(c2)
     np.testing.assert_allclose(c2.stress.values, curve.stress.values, rtol=1e-3)
 
 
 def test_compression_converges_with_elements_per_segment(cell):
     """Refining the yarn centerlines converges the stress: the interlacing bonds sit at the
-    control points, so only the discretisation of the same curves changes."""
+    control points, so only the discretisation of the same curves changes. Measured inside the
+    linear model's validity (0.15 % strain, status ok), where its answer is the one to converge;
+    halving the elements' length cuts the change about fourfold (second order)."""
     s = []
-    for n in (2, 3, 4, 6):
+    for n in (2, 4, 8):
         c = cell.replace(**{"resolution.elements_per_segment": n})
         assert c.info["n_bonds"] == cell.info["n_bonds"]
-        ds = homtex.compress(c, strain=0.1, steps=2)
+        ds = homtex.compress(c, strain=0.0015, steps=1)
         assert ds.attrs["status"] == "ok"
         s.append(float(ds.stress[-1]))
     d = np.abs(np.diff(s))
-    assert d[1] < 0.6 * d[0] and d[2] < d[1]           # differences shrink
-    assert abs(s[-1] - s[-2]) / s[-1] < 0.02           # 4 -> 6 elements: within 2 %
+    assert d[1] < 0.35 * d[0]                          # second order: ratio 4.4 measured
+    assert abs(s[-1] - s[-2]) / s[-1] < 0.005          # 4 -> 8 elements: within 0.5 %

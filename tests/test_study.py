@@ -329,3 +329,28 @@ def test_a_warning_of_a_point_result_is_kept(tmp_path, monkeypatch):
         want = f"force drop at x = {x:g}" if x > 1.5 else ""
         assert set(ds.check.sel(x=x).values.ravel()) == {want}
     assert check_meta(ds) == []
+
+
+def test_too_many_points_are_refused_before_any_is_made(tmp_path):
+    """A 200^4 grid or n = 1e9 samples exhausted the memory while the points were made; both are
+    a StudyError naming the table, key and limit, at once."""
+    from homtex.study.files import MAX_POINTS
+
+    values = "[" + ", ".join(str(float(i)) for i in range(200)) + "]"
+    grid = "[study]\nname = \"big\"\ntask = \"analytic\"\n[parameters]\n" + "".join(
+        f"p{i} = {values}\n" for i in range(4))
+    t0 = time.perf_counter()
+    with pytest.raises(StudyError, match=rf"\[parameters\] key 'p0'.*1\.6e\+09 points.*{MAX_POINTS:,}") as info:
+        load_study(write(tmp_path, grid, "grid.toml"))
+    assert info.value.file.endswith("grid.toml")
+    with pytest.raises(StudyError, match=rf"\[sampling\] key 'n': must be at most {MAX_POINTS:,}"):
+        load_study(write(tmp_path, SAMPLED.format(method="lhs", n=10 ** 9, seed=1), "samples.toml"))
+    assert time.perf_counter() - t0 < 1.0
+    assert load_study(write(tmp_path, grid.replace(values, "[1.0, 2.0]"), "small.toml")).n_points == 16
+
+
+def test_a_study_path_to_an_endless_file_is_refused(tmp_path):
+    if not Path("/dev/zero").exists():
+        pytest.skip("no /dev/zero here")
+    with pytest.raises(StudyError, match="not a regular file"):
+        load_study("/dev/zero")

@@ -6,6 +6,7 @@ import errno
 import json
 import logging
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -470,3 +471,50 @@ def test_bad_inputs_named_before_any_point_runs(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
     with pytest.raises(StudyError, match=r"\[units\] key 'z': not a parameter"):
         load_study(write(tmp_path, GRID.format(task="analytic", fail_above=1.0) + '[units]\nz = "mm"\n', "u.toml"))
+
+
+@pytest.mark.parametrize("code, words", [(errno.EROFS, "not writable (Read-only file system)"),
+                                         (errno.EACCES, "not writable (Permission denied)"),
+                                         (errno.ENOSPC, "is full")])
+def test_a_read_only_folder_on_a_full_disk_is_called_read_only(tmp_path, monkeypatch, capsys, code, words):
+    """The write probe refused with EROFS (a read-only mount) on a disk with no space left was
+    reported as "full": the error number decides, the free space only when there is none."""
+    import shutil
+
+    from homtex.output import io
+
+    p = grid(tmp_path)
+    real_open = os.open
+
+    def refuse(path, *a, **kw):
+        if ".write-probe-" in str(path):
+            raise OSError(code, os.strerror(code), str(path))
+        return real_open(path, *a, **kw)
+
+    monkeypatch.setattr(os, "open", refuse)
+    monkeypatch.setattr(io.shutil, "disk_usage", lambda f: shutil._ntuple_diskusage(100, 100, 0))
+    with pytest.raises(StudyError, match=re.escape(words)):
+        run_study(p, tmp_path / "out", workers=1, progress=False)
+    assert main(["study", str(p), "--out", str(tmp_path / "out"), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err and ("full" in err) == (code == errno.ENOSPC)
+
+
+@pytest.mark.parametrize("code, words", [(errno.EROFS, "a read-only file system"), (errno.EACCES, "permission denied"),
+                                         (errno.ENOSPC, "the disk is full")])
+def test_an_unwritable_out_folder_names_its_cause(tmp_path, monkeypatch, code, words):
+    """The command line's --out check: a read-only folder on a full disk is read-only, not full."""
+    import shutil
+    import tempfile
+
+    from homtex.app.paths import output_folder
+    from homtex.output import io
+
+    def refuse(*a, **kw):
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    monkeypatch.setattr(io.shutil, "disk_usage", lambda f: shutil._ntuple_diskusage(100, 100, 0))
+    with pytest.raises(InputError, match=re.escape(words)) as info:
+        output_folder(tmp_path)
+    assert ("full" in str(info.value)) == (code == errno.ENOSPC)

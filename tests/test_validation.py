@@ -156,7 +156,10 @@ except ModuleNotFoundError:  # pragma: no cover
 CELLS = sorted((Path(__file__).resolve().parents[1] / "cells").glob("*.toml"))
 
 BAD_LEAVES = ["a string", True, False, math.nan, math.inf, -math.inf, -1, 0, 0.0, -1e300, 1e300, 10 ** 18,
-              2.5, [], [1, 2, 3], [[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]], {"x": 1}, 10_000, 1e-300]
+              2.5, [], [1, 2, 3], [[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]], {"x": 1}, 10_000, 1e-300,
+              2 ** 70, 10 ** 400, [2 ** 70, 1]]   # beyond int64 and beyond double precision (tomllib reads them)
+#: what replaces a whole table of a cell file (a table where a value belongs is among BAD_LEAVES)
+BAD_TABLES = ["x", 1, 2.5, True, [1, 2], []]
 
 
 def _leaves(d, prefix=()):
@@ -165,6 +168,13 @@ def _leaves(d, prefix=()):
             yield from _leaves(v, prefix + (k,))
         else:
             yield prefix + (k,)
+
+
+def _tables(d, prefix=()):
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield prefix + (k,)
+            yield from _tables(v, prefix + (k,))
 
 
 def _set(d, path, value):
@@ -217,6 +227,25 @@ def test_mutated_cell_files_raise_cell_errors_or_build_finite_frames(path):
     assert outcomes["error"] > 0
 
 
+@pytest.mark.parametrize("path", CELLS, ids=[p.stem for p in CELLS])
+def test_a_value_in_place_of_a_table_is_a_cell_error(path):
+    """Every table of every shipped cell file (nested ones included: [parameters.seam],
+    [parameters.bars.pile], ...) replaced by a string, a number, a boolean or an array: a
+    CellError naming the table and key (``seam = "x"`` raised AttributeError)."""
+    from homtex.cells import Cell
+
+    data = tomllib.loads(path.read_text())
+    for table in _tables(data):
+        for value in BAD_TABLES:
+            d = copy.deepcopy(data)
+            _set(d, table, value)
+            try:
+                Cell(d, path).build()
+            except homtex.CellError as err:
+                assert err.file == str(path)
+                assert table[-1] in str(err), (table, value, str(err))
+
+
 @pytest.mark.parametrize("key", ["gauge", "courses_per_cm", "thickness"])
 @pytest.mark.parametrize("value", ["12", True, [12.0], {"v": 12}])
 def test_spacer_numbers_refuse_strings_and_booleans(key, value):
@@ -243,6 +272,65 @@ def test_sizes_are_bounded_before_allocation():
     with pytest.raises(homtex.CellError, match=r"max_elements"):
         Cell(spacer).build()
     assert time.perf_counter() - t0 < 5.0
+
+
+@pytest.mark.parametrize("key, value, limit", [("pile_segments", 2000, 100), ("elements_per_segment", 51, 50),
+                                               ("pile_segments", 2 ** 70, 100)])
+def test_spacer_resolution_is_bounded_before_building(key, value, limit):
+    """pile_segments = 2000 passed the max_elements check (16 000 elements) and then spent 9 s and
+    2.6 GB in a quadratic overlap search: the resolution keys are bounded up front."""
+    from homtex.cells import Cell
+
+    data = tomllib.loads((Path(__file__).resolve().parents[1] / "cells" / "spacer_20mm.toml").read_text())
+    data["resolution"][key] = value
+    t0 = time.perf_counter()
+    with pytest.raises(homtex.CellError, match=rf"must be <= {limit}") as info:
+        Cell(data).build()
+    assert (info.value.table, info.value.key) == ("resolution", key)
+    assert time.perf_counter() - t0 < 1.0
+    data["resolution"][key] = limit          # the limit itself is allowed
+    data["resolution"]["elements_per_segment" if key == "pile_segments" else "pile_segments"] = 1
+    assert Cell(data).frame.n_elements > 0
+
+
+def test_overlap_search_grows_with_the_elements_not_the_longest_one(monkeypatch):
+    """yarn_overlaps searched element midpoints within the longest element's length: one long
+    element among many short ones made every pair a candidate (quadratic). Its candidates are now
+    the elements within a few contact radii, and it finds what a brute-force search finds."""
+    from scipy.spatial import cKDTree
+
+    from homtex.geometry import curves
+    from homtex.geometry.curves import segment_distances, yarn_overlaps
+
+    n = 2000
+    x = np.linspace(0.0, 10.0, n + 1)
+    chain = np.c_[x, np.zeros(n + 1), np.zeros(n + 1)]
+    far = [[0.0, 5.0, 0.0], [100.0, 5.0, 0.0]]                  # one 100 mm element
+    cross = [[3.0, -1.0, 0.05], [3.0, 1.0, 0.05]]                 # crosses the chain, 0.05 mm above
+    nodes = np.vstack([chain, far, cross])
+    els = np.vstack([np.c_[np.arange(n), np.arange(1, n + 1)], [[n + 1, n + 2]], [[n + 3, n + 4]]])
+    fr = homtex.Frame(nodes, els, radius=0.05, E=1000.0, nu=0.3, yarn=np.r_[np.zeros(n), 1, 2].astype(int))
+    found = []
+
+    class Counting(cKDTree):
+        def sparse_distance_matrix(self, other, r, **kw):
+            out = super().sparse_distance_matrix(other, r, **kw)
+            found.append(out.nnz)
+            return out
+
+    monkeypatch.setattr(curves, "cKDTree", Counting)
+    ov = yarn_overlaps(fr)
+    # the neighbours within a few radii along the chain (about 80 each), not all n^2 = 4e6 pairs
+    assert sum(found) < 0.05 * fr.n_elements ** 2
+    # brute force: every pair of different yarns
+    a, b = np.triu_indices(fr.n_elements, 1)
+    a, b = a[fr.yarn[a] != fr.yarn[b]], b[fr.yarn[a] != fr.yarn[b]]
+    x0, d = fr.nodes[fr.elements[:, 0]], fr.element_vectors
+    dist, _, _ = segment_distances(x0[a], d[a], x0[b], d[b])
+    hit = fr.contact_radius[a] + fr.contact_radius[b] - dist > 1e-9
+    assert sorted(zip(ov["element_a"].tolist(), ov["element_b"].tolist())) == sorted(zip(a[hit].tolist(),
+                                                                                          b[hit].tolist()))
+    assert len(ov) > 0 and set(ov["yarn_a"].tolist()) | set(ov["yarn_b"].tolist()) == {0, 2}
 
 
 def test_deeply_nested_cell_file_is_a_cell_error(tmp_path):

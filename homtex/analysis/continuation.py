@@ -143,7 +143,7 @@ def checked_arc_step(eq: Equilibrium, rec, ds: float, t0: np.ndarray, prev, neg0
     if neg0 >= 0 and neg1 >= 0 and predictor is None:
         turned = np.sign(slope0) != np.sign(slope1)
         dneg = abs(neg1 - neg0)
-        if dneg > 1 and not _multiple(eq, neg1 - min(neg0, neg1)):
+        if dneg > 1 and not _multiple(eq, dneg):
             raise StepFailed(f"the stability changed by {dneg} eigenvalues inside one step")
         if turned and dneg == 0:
             raise StepFailed("the load factor turned back without a change of stability (two critical points)")
@@ -153,7 +153,7 @@ def checked_arc_step(eq: Equilibrium, rec, ds: float, t0: np.ndarray, prev, neg0
 def _multiple(eq: Equilibrium, k: int) -> bool:
     """True when the k lowest eigenvalues of the scaled tangent nearly coincide (a multiple one)."""
     mu, _ = eq.lowest_modes(k + 1)
-    low = mu[:k]
+    low = mu[np.argsort(np.abs(mu))[:k]]       # the k nearest zero: those that crossed it
     return bool(np.ptp(low) <= 1e-3 * max(float(np.abs(low).max()), 1e-300))
 
 

@@ -29,6 +29,7 @@ from ..fem.corotational_system import (
     scatter_bsr,
 )
 from ..model.frame import Frame
+from ..model.rest import RestState, start_rest
 
 #: tangent options: "consistent" (= "full": exact derivative of the forces), "tension" (linear
 #: element in the current frame plus the geometric stiffness of tensile members only: positive
@@ -47,6 +48,8 @@ class Corotational:
     ----------
     frame : Frame (periodic frames keep their fixed image offsets: zero macro strain).
     assembler : an Assembler of the frame to share (its block pattern is reused).
+    rest : a :class:`~homtex.model.rest.RestState` (rest lengths and per-end rest frames): the
+        stress-free shape when it is not the start geometry (default: the start geometry).
     geometric : tangent returned by :meth:`tangent`: "full" or "consistent" (the exact derivative
         of the internal forces; nonsymmetric away from equilibrium, indefinite after buckling),
         "tension" (default; the linear element in the current frame plus the axial-force
@@ -62,10 +65,14 @@ class Corotational:
     tangents after :meth:`evaluate_tangent` (spatial spins).
     """
 
-    def __init__(self, frame: Frame, assembler: Assembler | None = None, *, geometric: str = "tension"):
+    def __init__(self, frame: Frame, assembler: Assembler | None = None, *, geometric: str = "tension",
+                 rest: RestState | None = None):
         if geometric not in GEOMETRIC:
             raise InputError(f"geometric must be one of {GEOMETRIC}, got {geometric!r}")
         self.frame = frame
+        rest = start_rest(frame) if rest is None else rest.check(frame)
+        self.rest = rest
+        self.E0, self.L0 = rest.frames, rest.length
         self.geometric = geometric
         self.asm = assembler or Assembler(frame)
         n, m = frame.n_nodes, frame.n_elements
@@ -127,7 +134,7 @@ class Corotational:
         f = self.frame
         big = f.n_elements >= PARALLEL_ELEMENTS
         kernel = corotational_response if big else corotational_response_serial
-        kernel(np.ascontiguousarray(self.positions), self.Q, f.elements, self.shift, f.R, f.length,
+        kernel(np.ascontiguousarray(self.positions), self.Q, f.elements, self.shift, self.E0, self.L0,
                *self.arrays, self._prestrain(prestrain_scale), self.fe, self.Rr, self.lcur,
                self.theta, self.forces, self.energy)
         self._check()
@@ -142,7 +149,7 @@ class Corotational:
             self.Ke = np.zeros((f.n_elements, 12, 12))
         big = f.n_elements >= PARALLEL_ELEMENTS
         kernel = corotational_tangent if big else corotational_tangent_serial
-        kernel(np.ascontiguousarray(self.positions), self.Q, f.elements, self.shift, f.R, f.length, *self.arrays,
+        kernel(np.ascontiguousarray(self.positions), self.Q, f.elements, self.shift, self.E0, self.L0, *self.arrays,
                self._prestrain(prestrain_scale), self.fe, self.Ke, self.Rr, self.lcur, self.theta, self.forces,
                self.energy)
         self._check()
@@ -158,7 +165,6 @@ class Corotational:
         strain energy). "tension"/"none": the linear element in its co-rotated frame (at the last
         :meth:`evaluate`) plus the axial-force geometric stiffness of tensile members / none.
         """
-        f = self.frame
         p = self.asm.pattern
         if self.geometric in ("full", "consistent"):
             self.evaluate_tangent(prestrain_scale)
@@ -166,7 +172,7 @@ class Corotational:
             scatter_bsr(p.node_ptr, p.inc_elem, p.inc_end, p.slot_self, p.slot_other, self.Ke, K.data,
                         bool(symmetric))
             return K
-        K = self.asm.stiffness((self.Rr, f.length) + self.arrays)
+        K = self.asm.stiffness((self.Rr, self.L0) + self.arrays)
         if self.geometric == "tension":
             N = np.ascontiguousarray(np.maximum(self.forces[:, 6], 0.0))
             add_geometric(p.node_ptr, p.inc_elem, p.inc_end, p.slot_self, p.slot_other, self.Rr, self.lcur, N, K.data)

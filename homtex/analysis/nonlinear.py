@@ -19,7 +19,7 @@ from ..errors import InputError
 from ..model.frame import Frame
 from ..model.scene import parse_fixed, parse_loads
 from ..model.topology import check_held
-from ..validate import check_int, check_number, check_tol
+from ..validate import check_choice, check_int, check_number, check_tol
 from .corotational import GEOMETRIC, Corotational
 from .equilibrium import Equilibrium, Settings
 from .path import follow_arclength, follow_lambda
@@ -131,8 +131,7 @@ def solve_nonlinear(frame: Frame, fixed=None, loads=None, *, control: str = "loa
     """
     if not isinstance(frame, Frame):
         raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
-    if control not in CONTROLS:
-        raise InputError(f"control must be one of {CONTROLS}, got {control!r}")
+    check_choice(control, "control", CONTROLS)
     steps = check_int(steps, "steps", ge=1, le=10 ** 6)
     settings = Settings(tol=check_tol(tol), atol=None if atol is None else check_number(atol, "atol", gt=0.0),
                         max_iter=check_int(max_iter, "max_iter", ge=1, le=10000),

@@ -30,7 +30,7 @@ from ..errors import SolverError
 from .continuation import ENERGY_TOL, checked_arc_step, critical_point, land, locate_limit, mode_along
 from .equilibrium import Equilibrium, StepFailed
 from .records import PathRecorder
-from .stability import ORTHOGONAL, handle_unstable, is_limit, not_converged, snap_through
+from .stability import ORTHOGONAL, descend, handle_unstable, is_limit, not_converged, snap_through
 
 log = logging.getLogger(__name__)
 
@@ -54,11 +54,15 @@ def follow_lambda(eq: Equilibrium, rec: PathRecorder, steps: int, control: str) 
             cap = None if rate is None else s.max_growth * rate * (target - snap[2])
             it, rn, pred = eq.correct(target, cap)
             _check_jump(eq, snap, pred)
-            rate = _check_growth(eq, snap, rate, target - snap[2])
+            new_rate = _check_growth(eq, snap, rate, target - snap[2])
             if not eq.negative:
                 err = rec.step_energy_error(eq, rec.prev, rec.ends(eq))
                 if err > ENERGY_TOL:
                     raise StepFailed(f"the step's work misses its strain energy by {100 * err:.3g} % (a jump)")
+            # only an accepted step sets the rate: a rejected one (a stiffening structure's first
+            # long step, whose work misses its energy) would cap every shorter retry below its own
+            # linear predictor, and the step would be cut to nothing
+            rate = new_rate
         except StepFailed as err:
             eq.restore(snap)
             h = 0.5 * (target - snap[2])
@@ -66,10 +70,15 @@ def follow_lambda(eq: Equilibrium, rec: PathRecorder, steps: int, control: str) 
             log.debug("step to lambda %.6g failed (%s); cut to %.3g", target, err.reason, h)
             if h < h_min:
                 limit, ratio = is_limit(eq, rec)
-                if not limit:
+                if limit:
+                    snap_through(eq, rec, control, target)
+                    h, rate = h_max, None
+                elif _settle(eq, rec, snap, target):
+                    h, rate = 2.0 * (target - snap[2]), None
+                    if abs(eq.lam - k / steps) < 1e-12:
+                        k += 1
+                else:
                     raise not_converged(eq, control, target, err, ratio) from None
-                snap_through(eq, rec, control, target)
-                h, rate = h_max, None
             continue
         if s.stability and eq.negative:
             handle_unstable(eq, rec, snap, control)
@@ -82,6 +91,35 @@ def follow_lambda(eq: Equilibrium, rec: PathRecorder, steps: int, control: str) 
             k += 1
         elif eq.lam > k / steps:                 # a branch switch or snap went past requested levels
             k = int(np.floor(eq.lam * steps + 1e-9)) + 1
+
+
+def _settle(eq: Equilibrium, rec: PathRecorder, snap, target: float) -> bool:
+    """Newton failed at every step size away from any critical point: the start's tangent sees
+    almost none of the stiffness the step mobilises (a flat string or net, stiff only once it
+    deflects, overshoots by orders of magnitude from any predictor). Descend the total potential at
+    ``target`` instead (:func:`descend`, pseudo-transient continuation) and accept the stable state
+    it reaches as the step's end (the path is flagged when the step's work misses its strain
+    energy: the state is an equilibrium, the path to it untraced). False, the state restored, when
+    the descent fails."""
+    try:
+        eq.apply(np.zeros(len(eq.free)), target - snap[2])      # the prescribed motions at target too
+        eq.lam = target
+        it = descend(eq, target, np.zeros(6 * eq.n), 0.0)
+        err = rec.step_energy_error(eq, rec.prev, rec.ends(eq))
+    except (StepFailed, SolverError) as fail:
+        log.debug("settling at lambda %.6g failed (%s)", target, getattr(fail, "reason", fail))
+        eq.restore(snap)
+        return False
+    log.info("step to load factor %.6g: Newton failed at every size, the potential descended to a stable state "
+             "(%d iterations)", target, it)
+    rec.record(eq, it, float(np.linalg.norm(eq.residual(eq.lam))), snap)
+    if err > ENERGY_TOL:
+        # an equilibrium, but the path to it is not traced: its work is not verified
+        rec.flag(f"the state at load factor {target:.6g} was reached by descending the potential (Newton failed at "
+                 "every step size: the start's tangent sees almost none of the stiffness the step mobilises); the "
+                 f"step's work misses its strain energy by {100 * err:.3g} %, so the path to it is not verified "
+                 "(control='displacement' traces it)")
+    return True
 
 
 def _check_jump(eq: Equilibrium, snap, pred: np.ndarray) -> None:

@@ -26,6 +26,7 @@ the energy it releases is recorded as stabilisation energy (the path is then fla
 
 from __future__ import annotations
 
+import copy
 import logging
 
 import numpy as np
@@ -134,6 +135,8 @@ def snap_through(eq: Equilibrium, rec, control: str, lam_try: float) -> None:
             reasons.append(getattr(err, "reason", str(err)))
             eq.restore(start)
     else:
+        if _knee(eq, rec, lam_try):
+            return
         try:
             ds = max(eq.norm(eq.tangent_vector()) * 1e-3, 1e-6 * eq.length)
             continue_to(eq, rec, lam_s, ds, after_turn=True)
@@ -230,6 +233,28 @@ def descend(eq: Equilibrium, lam: float, direction: np.ndarray, amp: float, max_
             delta = min(delta * float(np.clip(ratio, 2.0, 10.0)), 1e12)
         r_prev = rn
     raise StepFailed(f"no stable equilibrium reached at load factor {lam:.6g} in {max_iter} descent iterations")
+
+
+def _knee(eq: Equilibrium, rec, lam_try: float) -> bool:
+    """No stable state to snap to at ``lam_try``: the nearly singular tangent may be a sharp knee
+    of a stable path (an imperfect column close to its bifurcation load), not a limit point. Follow
+    the path by arc length to ``lam_try``, recording its stable states; True when it gets there
+    without the load factor turning back (else the state is restored and False returned)."""
+    start, saved = eq.snapshot(), copy.deepcopy(rec.__dict__)     # the recorder's ledger too
+    n_events = len(rec.events)
+    try:
+        ds = max(eq.norm(eq.tangent_vector()) * 1e-3, 1e-6 * eq.length)
+        continue_to(eq, rec, lam_try, ds, record=True)
+    except (StepFailed, SolverError):
+        pass
+    else:
+        if all(k not in ("limit", "bifurcation") for k, _, _ in rec.events[n_events:]):
+            log.info("load factor %.6g: a sharp knee of a stable path, followed by arc length", lam_try)
+            return True
+    rec.__dict__.clear()
+    rec.__dict__.update(saved)
+    eq.restore(start)
+    return False
 
 
 def is_limit(eq: Equilibrium, rec) -> tuple[bool, float]:

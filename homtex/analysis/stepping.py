@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import InputError, SolverError
 
-__all__ = ["GROWTH", "Step", "StepFailure", "flag_force_drops", "march"]
+__all__ = ["FORCE_DROP_CAUSES", "GROWTH", "Step", "StepFailure", "flag_force_drops", "march"]
 
 log = logging.getLogger(__name__)
 
@@ -126,16 +126,27 @@ def march(solve: Callable[[float], object], targets, *, start: float = 0.0, step
         level = target
 
 
-def flag_force_drops(ds, *, rel: float = 0.02, what: str = "curve"):
+#: what a force drop may be, per model (the second cause is the model's own artefact)
+FORCE_DROP_CAUSES = {
+    "linear": "a snap-through or a load step too large for the re-linearised contact",
+    "nonlinear": "a snap-through or buckling of the yarns (physical), or a load step too large for the "
+                 "large-motion engine's step control",
+}
+
+
+def flag_force_drops(ds, *, rel: float = 0.02, what: str = "curve", model: str = "linear"):
     """Mark a displacement-controlled curve whose force falls on the way (in place; returns ds).
 
     A drop of more than ``rel`` x the force reached so far is either a snap-through (physical:
     a yarn buckles or slips past another) or an artefact of a load step too large for the
-    per-step re-linearised contact; the two differ in that the artefact moves with the step
+    model: the per-step re-linearised contact (``model="linear"``) or the large-motion engine's
+    step control (``model="nonlinear"``); the two differ in that the artefact moves with the step
     count. ``attrs``: ``force_drop_max`` (largest drop / force reached, 0 for a monotone curve),
     ``force_drop_strain`` (where it ends, NaN if none) and, above ``rel``, ``check`` (message,
     also warned).
     """
+    if model not in FORCE_DROP_CAUSES:
+        raise InputError(f"flag_force_drops: model must be one of {sorted(FORCE_DROP_CAUSES)}, got {model!r}")
     f = np.asarray(ds["force"].values, dtype=float)
     e = np.asarray(ds["strain"].values, dtype=float)
     ds.attrs["force_drop_max"] = 0.0
@@ -149,8 +160,8 @@ def flag_force_drops(ds, *, rel: float = 0.02, what: str = "curve"):
     if drop[k] > rel:
         ds.attrs["force_drop_strain"] = float(e[k])
         msg = (f"{what}: the force falls by {100 * drop[k]:.1f} % of the force reached, ending at strain "
-               f"{e[k]:.4g} (step {k + 1} of {len(f)}): a snap-through or a load step too large for the "
-               "re-linearised contact; run it again with twice the steps - an artefact moves, a snap stays")
+               f"{e[k]:.4g} (step {k + 1} of {len(f)}): {FORCE_DROP_CAUSES[model]}; run it again with twice "
+               "the steps - an artefact moves, a snap stays")
         ds.attrs["check"] = msg
         warnings.warn(msg, UserWarning, stacklevel=3)
         log.warning(msg)

@@ -18,6 +18,10 @@ nonsymmetric tangent with SuperLU where moments are applied about fixed axes.
 
 LDL^T without pivoting may lose accuracy on indefinite matrices: every solve is checked against
 the assembled matrix, refined, and redone with pivoting (SuperLU) when that does not help.
+
+The factorisation and the solves go through the tangent-solver interface of
+:mod:`homtex.linalg.tangent_solver` (analyse once, factor, solve, report): ``tangent_solver=``
+names the method of the symmetric tangent (default ``"ldl"``, qdldl as described above).
 """
 
 from __future__ import annotations
@@ -31,11 +35,7 @@ import scipy.sparse.linalg as spla
 from ..errors import SolverError
 from ..fem.corotational_system import add_blocks, scatter_free, sym_upper_matvec
 from ..linalg.solvers import blas_single_thread
-
-try:
-    import qdldl as _qdldl
-except Exception:  # pragma: no cover - qdldl is a declared dependency
-    _qdldl = None
+from ..linalg.tangent_solver import SymmetricUpper, make_tangent_solver, splu_or_raise
 
 log = logging.getLogger(__name__)
 
@@ -100,6 +100,10 @@ class FreeSystem:
         (rigid plates of a contact solve, say) carry no elements and couple only through
         ``couplings``.
     method : "ldl" (qdldl on the symmetric part; default) or "lu" (SuperLU on the full tangent).
+    tangent_solver : the :mod:`homtex.linalg.tangent_solver` method of the symmetric tangent:
+        "ldl", "cholmod", "amg" or "auto" (default: option ``tangent_solver``, "ldl"; with method
+        "lu" it only gives the inertia), or a
+        :class:`~homtex.linalg.tangent_solver.TangentSolver` instance (not shared between systems).
     couplings : (p, 2) node pairs whose translational 3 x 3 blocks belong to the pattern too
         (contact between yarns, or a yarn and a plate): :meth:`block_slots` maps blocks over
         such nodes to slots and :meth:`add_blocks` adds them after :meth:`assemble` (ldl only).
@@ -111,12 +115,9 @@ class FreeSystem:
     of the last LDL^T (None when only an LU factor exists).
     """
 
-    def __init__(self, frame, mask: np.ndarray, method: str = "ldl", *, couplings=None):
+    def __init__(self, frame, mask: np.ndarray, method: str = "ldl", *, couplings=None, tangent_solver=None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}")
-        if _qdldl is None:
-            raise ImportError("the large-rotation solver needs qdldl (LDL^T with reused symbolic analysis and the "
-                              "inertia of the tangent): pip install qdldl")
         self.method = method
         self._frame = frame
         self.mask = np.asarray(mask, dtype=bool)
@@ -134,12 +135,28 @@ class FreeSystem:
         if self.method == "lu":
             fp, fi, self.full_map, _ = _slots(frame, fidx, upper=False)
             self.F = sp.csc_matrix((np.zeros(len(fi)), fi, fp), shape=(nf, nf))
-        self._qd = None
-        self._lu = None
+        self._view = SymmetricUpper(self.A)
         self._sym = None
+        # with method "lu" the symmetric solver only counts negative eigenvalues: LDL^T
+        self.solver = _tangent_solver("ldl" if method == "lu" else tangent_solver, frame, self.mask, nf)
+        self.solver.analyse(self.A, self._view)
+        self._lu = make_tangent_solver("lu") if self.method == "lu" else None
         self.negative = None
-        self.refinements = 0
-        self.fallbacks = 0
+
+    @property
+    def refinements(self) -> int:
+        """Extra solves of iterative refinement so far."""
+        return self.solver.report.refinements
+
+    @property
+    def fallbacks(self) -> int:
+        """Solves redone with a pivoting LU so far."""
+        return self.solver.report.fallbacks
+
+    @property
+    def report(self):
+        """The :class:`~homtex.linalg.tangent_solver.TangentReport` of the symmetric tangent's solver."""
+        return self.solver.report
 
     # -- assembly
     def assemble(self, Ke: np.ndarray) -> None:
@@ -147,7 +164,7 @@ class FreeSystem:
         scatter_free(Ke, self.emap, self.A.data)
         if self.full_map is not None:
             _scatter_full(Ke, self.full_map, self.F.data)
-        self._sym = None
+        self._stale()
 
     def block_slots(self, nodes, strict: bool = True) -> np.ndarray:
         """(na, 3S, 3S) int32 slots of the translational blocks over ``nodes`` (na, S) in the
@@ -176,12 +193,12 @@ class FreeSystem:
         """Add symmetric blocks (na, B, B) at ``slots`` (na, B, B) from :meth:`block_slots`."""
         if len(blocks):
             add_blocks(np.ascontiguousarray(blocks, dtype=float), np.ascontiguousarray(slots), self.A.data)
-        self._sym = None
+        self._stale()
 
     def add_diagonal(self, d: np.ndarray) -> None:
         """Add d (nf,) to the diagonal of the free matrix."""
         self.A.data[self.A.indptr[1:] - 1] += d
-        self._sym = None
+        self._stale()
 
     def diagonal(self) -> np.ndarray:
         """(nf,) the diagonal of the free matrix (last assembly)."""
@@ -194,14 +211,18 @@ class FreeSystem:
         if base is None:
             base = self.A.data[slots].copy()
         self.A.data[slots] = base + sigma * np.abs(base)
-        self._sym = None
+        self._stale()
         return base
+
+    def _stale(self) -> None:
+        """The values changed: drop the cached full matrix."""
+        self._sym = None
+        self._view.invalidate()
 
     def symmetric(self) -> sp.csc_matrix:
         """The full symmetric matrix (both triangles) of the last assembly."""
         if self._sym is None:
-            U = self.A
-            self._sym = (U + U.T - sp.diags(U.diagonal())).tocsc()
+            self._sym = self._view.full()
         return self._sym
 
     # -- factorisation
@@ -209,61 +230,19 @@ class FreeSystem:
         """Factor the last assembled matrix (numeric only after the first call)."""
         self.negative = None
         if self.method == "lu":
-            self._lu = _splu(self.F)
+            self._lu.factor(self.F, inertia=False)
             if inertia:
-                self._ldl(inertia=True, required=False)
+                self.solver.factor(self.A, inertia=True)
+                self.negative = self.solver.negative
             return
-        self._ldl(inertia=inertia, required=True)
-
-    def _ldl(self, inertia: bool, required: bool) -> None:
-        A = self.A
-        try:
-            if self._qd is None:
-                self._qd = _qdldl.Solver(A, upper=True)
-            else:
-                self._qd.update(A, upper=True)
-        except RuntimeError:
-            # an exactly zero pivot (a singular tangent hit on the nose): perturb the diagonal by
-            # round-off and factor again; Newton absorbs the perturbation
-            d = np.abs(A.diagonal())
-            eps = 1e-13 * float(d.max(initial=1.0))
-            B = A + eps * sp.eye(A.shape[0], format="csc")
-            B = sp.csc_matrix((B.data, B.indices, B.indptr), shape=A.shape)
-            if B.nnz != A.nnz:
-                raise SolverError("the tangent's pattern changed") from None
-            try:
-                self._qd = _qdldl.Solver(B, upper=True)
-            except RuntimeError:
-                self._qd = None
-                if required:
-                    self._lu = _splu(self.symmetric())
-                return
-        if inertia:
-            _, D, _ = self._qd.factors()
-            self.negative = int(np.count_nonzero(D < 0.0))
+        self.solver.factor(self.A, inertia=inertia)
+        self.negative = self.solver.negative
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """x with (free tangent) x = b, checked against the assembled matrix and refined; (nf,)."""
-        if self.method == "lu" or self._qd is None:
+        if self.method == "lu":
             return self._lu.solve(b)
-        x = self._qd.solve(b)
-        nb = float(np.linalg.norm(b))
-        if nb == 0.0:
-            return x
-        r = b - self.matvec(x)
-        for _ in range(3):
-            err = float(np.linalg.norm(r)) / nb
-            if err <= 1e-9:
-                return x
-            self.refinements += 1
-            x = x + self._qd.solve(r)
-            r = b - self.matvec(x)
-        if float(np.linalg.norm(r)) / nb > 1e-6:
-            # LDL^T without pivoting failed on an indefinite matrix: pivoting LU for this solve
-            self.fallbacks += 1
-            log.debug("LDL^T solve inaccurate (%.1e); SuperLU with pivoting", float(np.linalg.norm(r)) / nb)
-            x = _splu(self.symmetric()).solve(b)
-        return x
+        return self.solver.solve(b)
 
     def full(self, Ke: np.ndarray) -> sp.csc_matrix:
         """The full (nonsymmetric) free-DOF tangent assembled from Ke (m, 12, 12)."""
@@ -283,11 +262,29 @@ class FreeSystem:
         return out
 
 
-def _splu(A):
-    try:
-        return spla.splu(sp.csc_matrix(A))
-    except RuntimeError as err:     # "Factor is exactly singular"
-        raise SolverError(f"the tangent stiffness is singular ({err})") from err
+_splu = splu_or_raise
+
+
+def _tangent_solver(spec, frame, mask, nf):
+    """The TangentSolver of a FreeSystem from a name (None: option ``tangent_solver``) or an instance."""
+    from ..config import option
+
+    if spec is not None and not isinstance(spec, str):
+        return spec
+    name = option("tangent_solver", spec)
+    if name in ("amg", "auto"):
+        from ..linalg.tangent_backends import AMGTangent, auto_tangent_solver
+
+        N = mask.size // 6
+        nodes = np.empty((N, 3))
+        nodes[:frame.n_nodes] = frame.nodes
+        nodes[frame.n_nodes:] = frame.nodes.mean(axis=0)
+        if name == "auto":
+            return auto_tangent_solver(nf, nodes, mask)
+        return AMGTangent(nodes, mask, tol=min(option("tol"), 1e-10))
+    if name == "cholmod":
+        from ..linalg import tangent_backends  # noqa: F401  (registers it)
+    return make_tangent_solver(name)
 
 
 def _scatter_full(Ke, fmap, data):

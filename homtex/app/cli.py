@@ -10,9 +10,16 @@
     homtex plot     FILE.nc [--out IMAGE] [--var NAME] [--sel DIM=VALUE]
 
 CELL is a cell file path (.toml) or a shipped cell name (spacer_20mm, octet, ...).
-A user's mistake (a bad option, file, folder or value) is one line ``homtex <cmd>: error: ...``
-and exit status 2, never a traceback; ``homtex --debug ...`` shows the traceback. Anything
-else is an internal error (exit status 3): run it again with --debug and report it.
+Exit status: 0 done (a result whose checks flag it, ``status`` "flagged", prints a warning line
+and still exits 0); 1 a computation that failed (a curve or profile with ``status`` "failed":
+its files are written and the reason printed; a study with failed points); 2 a user's mistake
+(a bad option, file, folder or value: one line ``homtex <cmd>: error: ...``, never a traceback;
+``homtex --debug ...`` shows it); 3 an internal error (run it again with --debug and report it);
+130 interrupted (Ctrl-C, also while the modules load: one line).
+
+The stage modules (numpy, numba, scipy, xarray, matplotlib: seconds to import) are imported by
+the command that needs them, inside :func:`main`, so that ``--help`` is quick and an interrupt
+while they load is caught like any other.
 """
 
 from __future__ import annotations
@@ -28,9 +35,6 @@ from pathlib import Path
 
 from .._version import __version__
 from ..errors import InputError, SolverError
-from ..study import run_study, summarize
-from .commands import cell_summary, compress_cell, homogenize_cell, macro_cell, plot_file, seam_cell
-from .main_job import main_job
 from .paths import output_folder
 
 log = logging.getLogger("homtex")
@@ -47,7 +51,21 @@ def _say(msg: str) -> None:
     print(msg, flush=True)
 
 
+def _check_status(args, ds) -> None:
+    """The status of a result Dataset on the console: "failed" prints its reason and exits with
+    status 1 (the files are already written), "flagged" prints a warning line (exit status 0)."""
+    status = str(ds.attrs.get("status", "ok"))
+    detail = str(ds.attrs.get("status_detail", "")) or "no detail recorded"
+    if status == "failed":
+        print(f"homtex {args.command}: failed: {detail} (what was computed before it is written)", file=sys.stderr)
+        raise SystemExit(1)
+    if status == "flagged":
+        print(f"homtex {args.command}: warning: the result is flagged: {detail}", file=sys.stderr)
+
+
 def cmd_run(args) -> None:
+    from .main_job import main_job
+
     t0 = time.perf_counter()
     outputs = main_job(_out(args, "results"), quick=args.quick)
     _say(f"\nmain job finished in {time.perf_counter() - t0:.1f} s; outputs:")
@@ -56,29 +74,39 @@ def cmd_run(args) -> None:
 
 
 def cmd_cell(args) -> None:
+    from .commands import cell_summary
+
     for name, path in cell_summary(args.cell, _out(args, "results/cell")).items():
         _say(f"  {name:<20s} {path}")
 
 
 def cmd_homogenize(args) -> None:
+    from .commands import homogenize_cell
+
     ds, paths = homogenize_cell(args.cell, _out(args, "results/homogenize"), solver=args.solver)
     _say(str(ds))
     for p in paths:
         _say(f"  wrote {p}")
+    _check_status(args, ds)
 
 
 def cmd_compress(args) -> None:
     if args.friction and args.geometry == "linear":
         raise InputError(f"--friction {args.friction:g} needs --geometry nonlinear: the linear contact solve is "
                          "frictionless")
+    from .commands import compress_cell
+
     ds, paths = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
                               steps=args.steps, geometry=args.geometry, friction=args.friction)
     _say(str(ds))
     for p in paths:
         _say(f"  wrote {p}")
+    _check_status(args, ds)
 
 
 def cmd_seam(args) -> None:
+    from .commands import seam_cell
+
     ds, paths = seam_cell(args.cell, _out(args, "results/seam"), seam_distance=args.distance,
                           prestrain=args.prestrain, method=args.method)
     _say(f"cushion height {float(ds['cushion_height']):.2f} mm, seam line {float(ds['seam_height']):.2f} mm "
@@ -88,11 +116,14 @@ def cmd_seam(args) -> None:
     _say(f"  note: {ds.attrs['validity']}")
     for p in paths:
         _say(f"  wrote {p}")
+    _check_status(args, ds)
 
 
 def cmd_macro(args) -> None:
     if args.curve is not None and args.steps is not None:
         raise InputError("give either --steps (compute the compression law) or --curve (a stored one), not both")
+    from .commands import macro_cell
+
     ds, paths, line = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
                                  height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
                                  slack_travel=args.slack_travel, seam_method=args.seam_method,
@@ -100,12 +131,15 @@ def cmd_macro(args) -> None:
                                  curve=args.curve)
     for p in paths:
         _say(f"  wrote {p}")
+    _check_status(args, ds)
 
 
 def cmd_study(args) -> None:
     """Run or resume a study. Exit status: 0 all points ok; 1 some points failed (result.nc is
     still written, with ``status``/``error`` per point; a rerun retries them unless
     --keep-failed); 2 bad input (study file, output folder, scheduler), via main()."""
+    from ..study import run_study, summarize
+
     ds = run_study(args.study, args.out, scheduler=args.scheduler, workers=args.workers,
                    keep_failed=args.keep_failed, connect_timeout=args.connect_timeout)
     _say(str(ds))
@@ -125,6 +159,8 @@ def cmd_study(args) -> None:
 
 
 def cmd_plot(args) -> None:
+    from .commands import plot_file
+
     _say(f"  wrote {plot_file(args.file, args.out, var=args.var, sel=args.sel)}")
 
 
@@ -408,21 +444,36 @@ def _message(exc: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit status (0 ok, 2 a user's mistake, 3 an internal error)."""
-    parser = build_parser()
+    """Run the command line; returns the exit status (0 ok, 1 a failed computation (raised as
+    SystemExit(1)), 2 a user's mistake, 3 an internal error, 130 interrupted). An interrupt
+    (Ctrl-C) anywhere, the stage modules' imports included, is one line and status 130."""
+    command = None
     try:
-        args, extra = parser.parse_known_args(argv)
-        if extra:   # an unknown option belongs to the subcommand: its usage and a suggestion
-            parser.commands[args.command].error(
-                f"unrecognized arguments: {' '.join(extra)}")
-    except SystemExit as exc:   # --help, --version, a usage error (argparse printed it)
-        return exc.code if isinstance(exc.code, int) else 2
+        parser = build_parser()
+        try:
+            args, extra = parser.parse_known_args(argv)
+            if extra:   # an unknown option belongs to the subcommand: its usage and a suggestion
+                parser.commands[args.command].error(
+                    f"unrecognized arguments: {' '.join(extra)}")
+        except SystemExit as exc:   # --help, --version, a usage error (argparse printed it)
+            return exc.code if isinstance(exc.code, int) else 2
+        command = args.command
+        out = getattr(args, "out", None)
+        if out is not None and not str(out).strip():
+            print(f"homtex {command}: error: --out {out!r}: an empty path; give a folder (or an image file for "
+                  "plot), or leave --out out for the default", file=sys.stderr)
+            return 2
+        return _run(args)
+    except KeyboardInterrupt:
+        print(f"homtex{' ' + command if command else ''}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _run(args) -> int:
+    """Run the parsed command: its exit status, with one line for an error (see :func:`main`)."""
     handler = _log_to_console()
     try:
         args.func(args)
-    except KeyboardInterrupt:
-        print(f"homtex {args.command}: interrupted", file=sys.stderr)
-        return 130
     except USER_ERRORS as exc:
         if args.debug:
             raise

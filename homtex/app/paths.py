@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["check_image_path", "heartbeat", "output_folder", "safe_stem", "stem_of", "writable"]
+__all__ = ["check_image_path", "heartbeat", "output_folder", "safe_stem", "stem_of", "writable", "write_problem"]
 
 log = logging.getLogger("homtex.app")
 
@@ -38,15 +38,35 @@ def stem_of(cell) -> str:
     return safe_stem(Path(str(path)).stem if path else getattr(cell, "name", "cell"))
 
 
-def writable(folder) -> bool:
-    """Can this process create a file in ``folder``? (tried: os.access says yes to root everywhere)"""
+def write_problem(folder) -> OSError | None:
+    """None if this process can create a file in ``folder`` (tried: os.access says yes to root
+    everywhere), else the OSError the attempt raised."""
     try:
         fd, probe = tempfile.mkstemp(prefix=".homtex-write-test.", dir=folder)
-    except OSError:
-        return False
+    except OSError as exc:
+        return exc
     os.close(fd)
     os.unlink(probe)
-    return True
+    return None
+
+
+def writable(folder) -> bool:
+    """Can this process create a file in ``folder``?"""
+    return write_problem(folder) is None
+
+
+def _not_writable(what, folder, exc: OSError) -> InputError:
+    """InputError naming why ``folder`` takes no file: permission, read-only, full (from the
+    error number first, :func:`homtex.output.io.write_failure`)."""
+    from ..output.io import write_failure
+
+    kind, cause = write_failure(folder, exc)
+    if kind == "refused":
+        return InputError(f"{what}: the folder is not writable ({cause}); make it writable or give another folder")
+    if kind == "full":
+        return InputError(f"{what}: cannot write into the folder: {cause}; free some space or give a folder on "
+                          "another disk")
+    return InputError(f"{what}: cannot write into the folder ({cause})")
 
 
 def output_folder(path) -> Path:
@@ -61,12 +81,15 @@ def output_folder(path) -> Path:
         raise InputError(f"--out {out}: a part of the path is a file, not a folder") from None
     except NotADirectoryError:
         raise InputError(f"--out {out}: a part of the path is a file, not a folder") from None
-    except PermissionError:
-        raise InputError(f"--out {out}: cannot create the folder (permission denied)") from None
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot create the folder ({exc.strerror or exc})") from None
-    if not writable(out):
-        raise InputError(f"--out {out}: the folder is not writable (permission denied or a read-only file system)")
+    except OSError as exc:     # permission, read-only file system, full disk: named from the error number
+        from ..output.io import write_failure
+
+        existing = next((a for a in out.absolute().parents if a.exists()), Path("/"))
+        _, cause = write_failure(existing, exc)
+        raise InputError(f"--out {out}: cannot create the folder ({cause})") from None
+    problem = write_problem(out)
+    if problem is not None:
+        raise _not_writable(f"--out {out}", out, problem)
     return out
 
 
@@ -93,8 +116,11 @@ def check_image_path(path) -> Path:
     folder = p.parent
     if not folder.is_dir():
         raise InputError(f"{p}: the folder {folder} does not exist")
-    if not writable(folder) or (p.exists() and not os.access(p, os.W_OK)):
-        raise InputError(f"{p}: not writable (permission denied or a read-only file system)")
+    problem = write_problem(folder)
+    if problem is not None:
+        raise _not_writable(str(p), folder, problem)
+    if p.exists() and not os.access(p, os.W_OK):
+        raise InputError(f"{p}: the file is not writable (permission denied); make it writable or give another name")
     return p
 
 

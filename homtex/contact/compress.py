@@ -20,6 +20,7 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.stepping import StepFailure, flag_force_drops, march
+from ..config import threads_for
 from ..errors import InputError
 from ..model.frame import Frame
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
@@ -149,9 +150,14 @@ def _record(rec, test: CompressionTest, res, target, control, nsub, masks):
     rec["group_energy"].append([float(tot[mk].sum()) for mk in masks])
 
 
+#: largest nodal rotation (rad) of a linear curve reported "ok": beyond it the small-rotation model
+#: is out of its range whatever the cell
+MAX_LINEAR_ROTATION = 0.1
+
+
 def run_compression(test: CompressionTest, targets, *, control: str, contact: Contact, solver: str, tol: float,
                     maxiter=None, max_cuts: int = 4, progress: bool = False, geometry: str = "linear",
-                    friction_spec: dict | None = None) -> xr.Dataset:
+                    friction_spec: dict | None = None, validity: dict | None = None) -> xr.Dataset:
     """The compression curve of ``test`` through the load levels ``targets`` (strains or kPa).
 
     ``geometry="linear"``: linear beams, contact re-linearised per step. A failing step is halved
@@ -159,13 +165,30 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
     step that still fails ends the curve: the steps before it are kept, ``attrs["status"]`` is
     "failed" and ``attrs["status_detail"]`` says where and why. ``geometry="nonlinear"``: the
     large-motion engine (:func:`homtex.contact.nl_compress.run_nonlinear_compression`;
-    ``friction_spec``: a cell file's friction table).
+    ``friction_spec``: a cell file's friction table). ``maxiter``: the iteration limit of the
+    iterative linear solves (linear), or the engine's Newton iterations per friction round
+    (nonlinear, :class:`~homtex.contact.incremental.NonlinearSettings` ``max_iter``); None: their
+    defaults. ``validity``: the cell file's ``[validity]`` table; a linear curve that goes beyond its
+    ``linear_strain_limit`` (measured), or whose nodes turn by more than ``MAX_LINEAR_ROTATION``, is
+    "flagged" (complete, but outside the linear model's range).
     """
-    if geometry == "nonlinear":
-        from .nl_compress import run_nonlinear_compression
+    with threads_for(test.frame.ndof):     # one numba thread for a small cell (homtex.config)
+        if geometry == "nonlinear":
+            from .incremental import NonlinearSettings
+            from .nl_compress import run_nonlinear_compression
 
-        return run_nonlinear_compression(test, targets, control=control, contact=contact,
-                                         friction_spec=friction_spec, max_cuts=max_cuts, progress=progress)
+            settings = None if maxiter is None else NonlinearSettings(max_iter=int(maxiter))
+            return run_nonlinear_compression(test, targets, control=control, contact=contact,
+                                             friction_spec=friction_spec, max_cuts=max_cuts, progress=progress,
+                                             settings=settings)
+        return _linear_curve(test, targets, control=control, contact=contact, solver=solver, tol=tol,
+                             maxiter=maxiter, max_cuts=max_cuts, progress=progress, geometry=geometry,
+                             validity=validity)
+
+
+def _linear_curve(test, targets, *, control, contact, solver, tol, maxiter, max_cuts, progress, geometry,
+                  validity):
+    """The linear model's curve (see :func:`run_compression`)."""
     t0 = time.perf_counter()
     cs = test.solver(contact, solver=solver, tol=tol, maxiter=maxiter)
     names = list(test.groups)
@@ -197,6 +220,8 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
                 continue
             bar.step(f"{st.substeps} sub-steps" if st.substeps > 1 else "")
             _record(rec, test, res, float(targets[st.target]), control, st.substeps, masks)
+            rot = float(np.abs(res.u[:test.frame.n_nodes, 3:]).max(initial=0.0))
+            state["rotation"] = max(state.get("rotation", 0.0), rot)
     except (StepFailure, RuntimeError) as err:
         k = getattr(err, "target", None)
         k = len(rec["strain"]) if k is None else k
@@ -223,11 +248,32 @@ def run_compression(test: CompressionTest, targets, *, control: str, contact: Co
         seconds=time.perf_counter() - t0, geometry=geometry, supports=str(test.fixed),
         steps_requested=int(len(targets)), initial_overlap=contact.initial_overlap,
         initial_overlaps=int(cs.initial_overlaps), initial_overlap_max_mm=cs.initial_overlap_max)
+    if status is Status.OK and len(rec["strain"]):
+        why = _linear_validity(ds, validity or {}, state.get("rotation", 0.0))
+        if why:
+            status, detail = Status.FLAGGED, why
+            log.warning("compress: %s", why)
     set_status(ds, status, detail)
     ds.attrs["steps_done"] = int(len(rec["strain"]))
     if control == "displacement":
         flag_force_drops(ds, what="compress")
     return ds
+
+
+def _linear_validity(ds, validity: dict, rotation: float) -> str:
+    """'' when a linear curve stays within the model's range, else why not."""
+    msgs = []
+    top = float(np.max(ds.strain.values))
+    lim = validity.get("linear_strain_limit")
+    ds.attrs["linear_strain_limit"] = float(lim) if lim is not None else float("nan")
+    if lim is not None and top > float(lim) * (1 + 1e-9):
+        msgs.append(f"the linear model holds on this cell to a compression strain of {float(lim):.3g} (its stress "
+                    f"within 10 % of the large-motion engine's: {validity.get('source', 'measured')}); this curve "
+                    f"goes to {top:.3g}: compress with geometry='nonlinear' beyond it")
+    if rotation > MAX_LINEAR_ROTATION:
+        msgs.append(f"nodes turn by up to {rotation:.3g} rad (beyond the {MAX_LINEAR_ROTATION:g} rad of small-rotation "
+                    "beams): compress with geometry='nonlinear'")
+    return "; ".join(msgs)
 
 
 def compression_summary(curve, *, validity: float = 0.30) -> dict:

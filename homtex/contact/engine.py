@@ -256,6 +256,9 @@ class _Run:
              "max_axial_strain": float(np.abs(axial).max(initial=0.0)),
              "strain_exceeded": bool(np.any((np.abs(axial) > limit) | (shear > limit)))}
         react = info.extra["reactions"]
+        if sol.lat is not None:
+            r["periods"] = sol.lat.periods.copy()
+            r["lattice_force"] = react[sol.lat.rows, :3].copy()
         r["plate_z"] = sol.plates.z.copy()
         r["plate_force"] = sol.plates.normal * ev["plates"]["grad_plate"] if sol.P else np.zeros(0)
         r["u"] = sol.cor.u()[self.monitor]
@@ -275,6 +278,10 @@ class _Run:
                                    "N", "force of the yarns on the plate, pressing it along its normal (compression "
                                         "positive)")
             coords["plate"] = (np.arange(P), "1", "plate")
+        if self.sol.lat is not None:
+            data.update(_lattice_vars(self.rows, n, self.sol.lat.k))
+            coords["vector"] = (np.arange(self.sol.lat.k), "1", "lattice vector")
+            coords["component"] = (np.array(["x", "y", "z"]), "1", "Cartesian component")
         m = len(self.monitor)
         if m:
             coords["node"] = (np.asarray(self.monitor), "1", "monitored node")
@@ -286,6 +293,16 @@ class _Run:
                              "N (ux, uy, uz), N mm (rx, ry, rz)", "external force on monitored nodes: loads plus "
                                                                   "support reactions")
         return curve_dataset(data, coords, attrs)
+
+
+def _lattice_vars(rows, n, k) -> dict:
+    """Path variables of a moving lattice: the lattice vectors and their generalised forces."""
+    return {"periods": (("step", "vector", "component"), np.array([r["periods"] for r in rows]).reshape(n, k, 3),
+                        "mm", "lattice vectors of the periodic frame"),
+            "lattice_force": (("step", "vector", "component"),
+                              np.array([r["lattice_force"] for r in rows]).reshape(n, k, 3), "N",
+                              "force on each lattice vector component, dPi/da (the force the cell carries across "
+                              "the boundary the vector spans; zero on free components)")}
 
 
 def _plates_for_run(plates, initial: EngineState | None):
@@ -315,7 +332,7 @@ def _plates_for_run(plates, initial: EngineState | None):
 def run_engine(frame, fixed=None, loads=None, *, contact: Contact, plates=None, steps: int = 10,
                prestrain: float | None = None, initial: EngineState | None = None, friction_spec: dict | None = None,
                max_cuts: int = 10, refine: float = 0.003, settings: NonlinearSettings | None = None, monitor=None,
-               progress: bool = False) -> NonlinearResult:
+               progress: bool = False, rest=None, lattice=None) -> NonlinearResult:
     """Follow lambda from 0 to 1 in ``steps`` levels with the large-motion engine (see the module
     docstring and :func:`homtex.solve_nonlinear`); SolverError names the level that failed (its
     ``result`` attribute holds the path up to it)."""
@@ -324,11 +341,11 @@ def run_engine(frame, fixed=None, loads=None, *, contact: Contact, plates=None, 
     start_plates, motion_z, f0, f1 = _plates_for_run(plates, initial)
     s0 = float(initial.prestrain_scale) if initial is not None else (0.0 if prestrain is not None else 1.0)
     sol = IncrementalSolver(frame, fixed, loads, start_plates, contact, friction_spec=friction_spec, settings=settings,
-                            initial=initial, prestrain_scale=s0)
+                            initial=initial, prestrain_scale=s0, rest=rest, lattice=lattice)
     mask, ubar = parse_fixed(fixed, n)
     f = parse_loads(loads, n)
     driven = bool(np.any(ubar != 0.0) or np.any(f != 0.0) or np.any(motion_z != 0.0) or np.any(f1 != f0) or
-                  (prestrain is not None and float(prestrain) != s0))
+                  (prestrain is not None and float(prestrain) != s0) or (sol.lat is not None and sol.lat.driven))
     if monitor is None:
         monitor = np.flatnonzero(np.any((f != 0.0).reshape(n, 6) | (ubar != 0.0).reshape(n, 6), axis=1))
     run = _Run(sol, np.array([p.z for p in start_plates], dtype=float), motion_z, f0, f1, s0,

@@ -106,7 +106,7 @@ def _basis(nx, ny, nz, T, j):
 
 
 @njit(cache=True)
-def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, lo, hi, lam, coef, T):
+def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, lo, hi, lam, coef, T):
     """Lagged terms of active pairs idx[lo:hi]: lam (na, 9), coef (na, 9, 4), T (na, 9, 3, 2)."""
     P = np.empty((4, 3))
     gc = np.empty(12)
@@ -125,7 +125,7 @@ def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, 
             d = np.sqrt(_d2_at(P, s, t))
             if d - rsum[q] >= ghat or d <= 0.0:
                 continue
-            e, e1, e2 = _phi(d - rsum[q], kind, kappa, ghat)
+            e, e1, e2 = _phi(d - rsum[q], kind, kp, ghat)
             lam[r, j] = -W * e1
             coef[r, j, 0] = 1.0 - s
             coef[r, j, 1] = s
@@ -140,8 +140,8 @@ def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, 
 
 
 @njit(cache=True)
-def _pair_lag(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, lam, coef, T):
-    _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, 0, idx.size, lam, coef, T)
+def _pair_lag(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, lam, coef, T):
+    _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, 0, idx.size, lam, coef, T)
 
 
 @njit(cache=True)
@@ -309,17 +309,17 @@ def pair_friction_lag(x_lag, stencil: PairStencil, enforcement: Enforcement, mu=
     x = _positions(x_lag, int(stencil.nodes.max()) + 1 if len(stencil) else None)
     mu_c = friction_coefficients(mu, n=len(stencil))
     from_gap = pair_gaps(x, stencil)
-    idx = np.flatnonzero((from_gap < enforcement.ghat) & (mu_c > 0)).astype(np.int64)
+    idx = np.flatnonzero((from_gap < enforcement.cutoff) & (mu_c > 0)).astype(np.int64)
     na = len(idx)
     lam = np.zeros((na, 9))
     coef = np.zeros((na, 9, 4))
     T = np.zeros((na, 9, 3, 2))
     if na:
-        if enforcement.kind == "barrier" and from_gap[idx].min() <= 0:
+        if enforcement.kind in ("barrier", "shell") and from_gap[idx].min() <= 0:
             raise InputError("x_lag: a pair's gap is <= 0, where the barrier is infinite")
         c0, c1 = enforcement.c_range
         _pair_lag(x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
-                  enforcement.code, float(enforcement.kappa), float(enforcement.ghat), c0, c1, lam, coef, T)
+                  enforcement.code, enforcement.params, enforcement.cutoff, c0, c1, lam, coef, T)
     return FrictionLag(nodes=stencil.nodes[idx], coef=coef, basis=T, lam=lam, mu=mu_c[idx], index=idx,
                        plate=np.full(na, -1, dtype=np.int64))
 
@@ -332,7 +332,7 @@ def plate_friction_lag(x_lag, nodes, radius, origin, normal, enforcement: Enforc
     nodes, radius, plate = _plate_args(x, nodes, radius, plate, len(o))
     mu_c = friction_coefficients(mu, n=len(nodes))
     gap = np.einsum("ij,ij->i", x[nodes] - o[plate], nr[plate]) - radius
-    idx = np.flatnonzero((gap < enforcement.ghat) & (mu_c > 0))
+    idx = np.flatnonzero((gap < enforcement.cutoff) & (mu_c > 0))
     e, e1, e2 = enforcement.energy(gap[idx])
     if not np.isfinite(e1).all():
         raise InputError("x_lag: a node's plate gap is <= 0, where the barrier is infinite")

@@ -49,10 +49,10 @@ from ..model.frame import Frame
 from ..model.scene import Plate, Scene, parse_loads
 from .ccd import pair_step_bound, plate_step_bound
 from .friction import friction_potential
-from .ipc_scene import ContactScene, PlateState, friction_setup
+from .ipc_scene import PlateState
 from .ipc_system import SystemMixin, _StepFailed, lag_change, serial_numba
+from .lattice import Lattice, LatticeDriver, LatticeMixin, image_motion
 from .options import Contact
-from .potential import Enforcement
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,10 @@ class NonlinearSettings:
     motion is left, friction's Hessian saturates at this share of the largest prescribed
     translation instead of eps_v (measured on the spacer cell with mu = 0.2 and the capstan:
     0 (the stick stiffness) fails the capstan's sliding rope, 0.03-0.1 pass both, 1 makes the
-    spacer curve 2-3x slower).
+    spacer curve 2-3x slower). stabilization : what the ledger counts as taken out at fixed
+    prescribed motions: "damping" (the pseudo-viscous work sum du M du / delta) or "released"
+    (the decrease of the total potential over the corrector iterations: a relaxation from a
+    generated geometry, whose stored energy the solver releases, balances exactly).
     """
 
     tol: float = 1e-8
@@ -86,6 +89,7 @@ class NonlinearSettings:
     delta_max: float = 1e12
     armijo: float = 1e-4
     predictor_slip: float = 0.1
+    stabilization: str = "damping"
 
 
 @dataclass
@@ -94,7 +98,8 @@ class EngineState:
     ``homtex.solve_nonlinear``): translations ``ut`` (n, 3, mm), rotations ``Q`` (n, 3, 3), the
     pre-strain scale, the dead loads acting (n, 6; N, N mm), the plates (heights, normals, force
     pressing each force-controlled plate on the yarns, NaN for displacement control), the touch
-    offsets of pairs that touched in the reference geometry, the PTC step and the energy ledger."""
+    offsets of pairs that touched in the reference geometry, the PTC step, the energy ledger and
+    (a moving lattice) the current lattice vectors (k, 3), mm."""
 
     n_nodes: int
     n_elements: int
@@ -108,6 +113,7 @@ class EngineState:
     touch: tuple
     ledger: dict
     delta: float = 1e12
+    periods: np.ndarray | None = None
 
     def check(self, frame) -> None:
         """InputError unless ``frame`` is the frame this state belongs to (same nodes and elements)."""
@@ -136,7 +142,7 @@ class StepInfo:
     extra: dict = field(default_factory=dict)
 
 
-class IncrementalSolver(SystemMixin):
+class IncrementalSolver(SystemMixin, LatticeMixin):
     """Large-rotation frame with large-motion contact and friction, stepped quasi-statically.
 
     Parameters
@@ -156,11 +162,17 @@ class IncrementalSolver(SystemMixin):
         ``loads`` given here are added on top, scaled by the load factor).
     prestrain_scale : the factor on the frame's pre-strain at the start (default 1, or the
         initial state's).
+    rest : a :class:`~homtex.model.rest.RestState`: the yarns' stress-free shape when it is not
+        the start geometry (energies count from it).
+    lattice : a :class:`~homtex.contact.lattice.Lattice` (periodic frames): lattice vectors as
+        unknowns, held, prescribed (``motion`` scaled by the motion factor) or free, after the
+        plates in the DOF arrays (rows n + P ...).
     """
 
     def __init__(self, frame: Frame, fixed=None, loads=None, plates=(), contact: Contact | None = None, *,
                  friction_spec: dict | None = None, settings: NonlinearSettings | None = None,
-                 initial: EngineState | None = None, prestrain_scale: float | None = None):
+                 initial: EngineState | None = None, prestrain_scale: float | None = None, rest=None,
+                 lattice: Lattice | None = None):
         if not isinstance(frame, Frame):
             raise InputError(f"frame must be a homtex.Frame, got {type(frame).__name__}")
         contact = Contact() if contact is None else contact
@@ -171,33 +183,30 @@ class IncrementalSolver(SystemMixin):
         self.contact = contact
         sc = Scene.build(frame, fixed, loads, plates)
         n, P = frame.n_nodes, len(sc.plates)
-        self.n, self.P, self.N = n, P, n + P
-        r = frame.contact_radius
-        ghat = contact.barrier_gap * float(r.min())
-        kappa = contact.barrier_stiffness or float(np.mean(frame.EA / frame.length))
-        enf = Enforcement("barrier", ghat=ghat, kappa=kappa)
-        eps_v = contact.friction_slip if contact.friction_slip is not None else 1e-3 * float(r.min())
-        self.ghat, self.kappa, self.eps_v = ghat, kappa, eps_v
+        k = frame.dim_periodic if lattice is not None else 0
+        self.n, self.P, self.N = n, P, n + P + k
+        if initial is not None:
+            initial.check(frame)
+        if lattice is not None:
+            self.lat = LatticeDriver(frame, lattice, n + P, None if initial is None else initial.periods)
         fc = np.array([p.force_controlled for p in sc.plates], dtype=bool)
         self.plates = PlateState(z=np.array([float(p.z) for p in sc.plates]),
                                  normal=np.array([int(p.normal) for p in sc.plates]), force_controlled=fc)
-        margin = contact.margin if contact.margin is not None else max(float(r.max()), 20.0 * ghat)
-        if initial is not None:
-            initial.check(frame)
-        self.scene = ContactScene(frame, self.plates, enf, enf, friction_setup(frame, contact, friction_spec),
-                                  max(margin, 2.0 * ghat), touch=None if initial is None else initial.touch)
-        # the widest search: a node moves at most half of it per iteration
-        self.max_margin = max(self.scene.margin, 4.0 * float(r.max()))
+        self._contact_setup(frame, contact, friction_spec, initial)
         mask = np.ones((self.N, 6), dtype=bool)
         mask[:n] = sc.mask.reshape(n, 6)
-        mask[n:, 2] = ~fc
+        mask[n:n + P, 2] = ~fc
+        if self.lat is not None:
+            mask[self.lat.rows, :3] = self.lat.held
         self.mask = mask.ravel()
         self.free = np.flatnonzero(~self.mask)
         self.ubar = np.where(sc.mask, sc.values, 0.0).reshape(n, 6)
         self.f_loads = sc.loads.reshape(n, 6)
         self.f_base = np.zeros((n, 6))         # loads at load factor 0 (those of a continued solve)
         self.plate_force = np.array([p.normal * p.force if p.force_controlled else 0.0 for p in sc.plates])
-        self.cor = Corotational(frame, geometric="consistent")
+        self.cor = Corotational(frame, geometric="consistent", rest=rest)
+        if self.lat is not None:
+            self.cor.shift[...] = self.lat.shifts()
         self.motion = 0.0
         self.presc = np.zeros((n, 6))          # prescribed DOFs moved since the start (mm, rad)
         self.load_scale = 0.0
@@ -262,7 +271,8 @@ class IncrementalSolver(SystemMixin):
 
     def snapshot(self):
         return (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy(), self.motion, self.prestrain_scale,
-                self.delta, self.plate_force.copy(), self.load_scale, self.presc.copy())
+                self.delta, self.plate_force.copy(), self.load_scale, self.presc.copy(),
+                None if self.lat is None else self.lat.periods.copy())
 
     def applied_loads(self) -> np.ndarray:
         """(n, 6) dead loads at the current load factor (N, N mm)."""
@@ -278,7 +288,8 @@ class IncrementalSolver(SystemMixin):
                            plate_force=np.where(self.plates.force_controlled, self.plates.normal * self.plate_force,
                                                 np.nan),
                            touch=(sc.touch_keys.copy(), sc.touch_rsum.copy(), sc.touch_gap.copy()),
-                           ledger=dict(self.ledger), delta=float(self.delta))
+                           ledger=dict(self.ledger), delta=float(self.delta),
+                           periods=None if self.lat is None else self.lat.periods.copy())
 
     def set_loads(self, loads) -> None:
         """Replace the dead loads (dict node -> (Fx, Fy, Fz, Mx, My, Mz), N and N mm, scaled by the
@@ -303,6 +314,12 @@ class IncrementalSolver(SystemMixin):
         self.plate_force[...] = snap[6]
         self.load_scale = snap[7]
         self.presc[...] = snap[8]
+        if self.lat is not None:
+            self._set_periods(snap[9])
+            # the prescribed components' target of the restored motion factor: a step that failed
+            # had set its own, and a settling solve at the restored level (the stepper's kick along
+            # a critical mode) must not go on to drive the lattice there
+            self.lat.set_target(self.motion)
 
     # ------------------------------------------------------------------ public step
     def solve(self, *, motion: float | None = None, loads: float | None = None, plate_z=None, plate_force=None,
@@ -340,6 +357,8 @@ class IncrementalSolver(SystemMixin):
             if motion is not None:
                 self.motion = float(motion)
                 target = np.where(self.mask[:6 * self.n].reshape(self.n, 6), self.motion * self.ubar, 0.0)
+                if self.lat is not None:
+                    self.lat.set_target(self.motion)
             for node, spec in (prescribed or {}).items():
                 for dof, v in spec.items():
                     if not self.mask[6 * node + dof]:
@@ -363,9 +382,10 @@ class IncrementalSolver(SystemMixin):
         self.info = info = StepInfo()
         x_start = self.positions.copy()
         z_start = self.plates.z.copy()
+        self._p_start = None if self.lat is None else self.lat.periods.copy()
         self.delta = min(self.delta, self.s.delta_max)
         self.M = None
-        lag = start_lag = self.scene.friction_lag(x_start, z_start)
+        lag = start_lag = self.scene.friction_lag(self._xc(x_start), z_start)
         rounds = self.s.friction_rounds if self.scene.has_friction else 1
         for rnd in range(rounds):
             self._newton(target_u, target_z, x_start, lag)
@@ -373,8 +393,8 @@ class IncrementalSolver(SystemMixin):
             used = lag
             if not self.scene.has_friction:
                 break
-            lag = self.scene.friction_lag(self.positions, self.plates.z)
-            info.extra["lag_change"] = lag_change(used, lag, self.n)
+            lag = self.scene.friction_lag(self._xc(self.positions), self.plates.z)
+            info.extra["lag_change"] = lag_change(used, lag, self._n_contact())
             if info.extra["lag_change"] <= self.s.friction_tol:
                 break
         self.lag = used
@@ -392,14 +412,16 @@ class IncrementalSolver(SystemMixin):
     def _dissipation(self, lag, x_start) -> float:
         """Energy friction dissipates over the step to the current state with the normal forces,
         bases and closest points of ``lag`` (N mm; :func:`~homtex.contact.friction.friction_potential`)."""
-        x = self.positions
-        return float(sum(friction_potential(lg, x, x_start, self.eps_v, hessian=False).dissipation
+        x, x0 = self._xc(self.positions), self._xc(x_start, self._p_start)
+        return float(sum(friction_potential(lg, x, x0, self.eps_v, hessian=False).dissipation
                          for lg in lag if lg is not None and len(lg)))
 
     def _remaining(self, target_u, target_z) -> np.ndarray:
         d = np.zeros((self.N, 6))
         d[:self.n] = target_u - self.presc
-        d[self.n:, 2] = np.where(self.plates.force_controlled, 0.0, target_z - self.plates.z)
+        d[self.n:self.n + self.P, 2] = np.where(self.plates.force_controlled, 0.0, target_z - self.plates.z)
+        if self.lat is not None:
+            d[self.lat.rows, :3] = self.lat.remaining()
         return d
 
     def _converged(self, ev, rn, relax: float = 1.0) -> bool:
@@ -475,14 +497,21 @@ class IncrementalSolver(SystemMixin):
             if not presc:
                 # the damping work at fixed prescribed motions: energy the pseudo-viscous term takes
                 # out while the state relaxes to equilibrium (while the plates move, it only slows
-                # the motion they drive)
-                info.stabilization += float(df @ (self.M * df)) / self.delta
+                # the motion they drive); "released": the potential's whole decrease (a relaxation
+                # from a state far from equilibrium, whose energy the solver takes out in any case)
+                if self.s.stabilization == "released":
+                    info.stabilization -= dPi
+                else:
+                    info.stabilization += float(df @ (self.M * df)) / self.delta
             info.iterations += 1
             if presc:
                 self.presc += min(alpha, 1.0) * (target_u - self.presc)
                 if alpha >= 1.0:
                     self.presc[...] = target_u
                     self.plates.z[~self.plates.force_controlled] = target_z[~self.plates.force_controlled]
+                    if self.lat is not None:
+                        self.lat.reach_target()
+                        self._set_periods(self.lat.periods)
         raise _StepFailed(f"did not converge in {s.max_iter} iterations (out-of-balance force {r_prev:.3e})")
 
     def _line_search(self, ev, d, x_start, lag, presc, it) -> float:
@@ -490,10 +519,14 @@ class IncrementalSolver(SystemMixin):
         s, info = self.s, self.info
         x = self.positions
         dx = d[:self.n, :3]
-        dz = d[self.n:, 2]
+        dz = d[self.n:self.n + self.P, 2]
+        dxc = self._disp_c(d)
         spin = float(np.abs(d[:self.n, 3:]).max(initial=0.0))
         amax = min(1.0, s.max_spin / spin) if spin > 0 else 1.0
-        move = float(np.sqrt(np.einsum("ij,ij->i", dx, dx)).max(initial=0.0))
+        move = float(np.sqrt(np.einsum("ij,ij->i", dxc, dxc)).max(initial=0.0))
+        if self.lat is not None:            # the neighbouring cells' copies move with the lattice too
+            move = max(move, float(np.sqrt(np.einsum("ij,ij->i", dx, dx)).max(initial=0.0))
+                       + image_motion(d[self.lat.rows, :3]))
         # a node moves at most half the widest search margin per iteration
         amax = min(amax, 0.5 * (self.max_margin - 2.0 * self.ghat) / move) if move > 0 else amax
         reach = amax * move
@@ -502,7 +535,8 @@ class IncrementalSolver(SystemMixin):
         st = self.scene.stencil
         a = amax
         if len(st):
-            a = min(a, amax * pair_step_bound(x, amax * dx, st, eta=s.eta))
+            dxc = self._disp_c(d)           # (a search may have added virtual nodes)
+            a = min(a, amax * pair_step_bound(self._xc(x), amax * dxc, st, eta=s.eta))
         if self.P:
             pn, pi = self.scene.plate_nodes, self.scene.plate_index
             a = min(a, amax * plate_step_bound(x, amax * dx, pn, self.scene.node_r[pn], self.plates.origins(),
@@ -518,9 +552,11 @@ class IncrementalSolver(SystemMixin):
         g = ev["g"]
         free = self.free
         slope = float(g.ravel()[free] @ d.ravel()[free])
-        base = (self.cor.ut.copy(), self.cor.Q.copy(), self.plates.z.copy())
+        base = self.snapshot()
         Pi0 = ev["Pi"]
         ext = float(np.sum(self.applied_loads() * d[:self.n])) + float(self.plate_force @ dz)
+        if self.lat is not None:
+            ext += float(np.sum(self._lattice_loads() * d[self.lat.rows, :3]))
         for _ in range(40):
             self._apply(a, d)
             if presc:
@@ -530,7 +566,7 @@ class IncrementalSolver(SystemMixin):
             if np.isfinite(trial["Pi"]) and (dPi <= s.armijo * a * slope or
                                              abs(slope) * a < 1e-14 * max(abs(Pi0), 1e-300)):
                 return a, dPi, slope
-            self.cor.ut[...], self.cor.Q[...], self.plates.z[...] = base
+            self.restore(base)
             a *= 0.5
             info.cuts += 1
         raise _StepFailed(f"the line search found no decrease at iteration {it}")
@@ -543,7 +579,7 @@ class IncrementalSolver(SystemMixin):
         if len(self.scene.stencil):
             from .potential import pair_gaps
 
-            gmin = min(gmin, float(pair_gaps(x, self.scene.stencil).min()))
+            gmin = min(gmin, float(pair_gaps(self._xc(x), self.scene.stencil).min()))
         return gmin < 1e-6 * self.ghat
 
     def _adapt(self, df, alpha, dPi, slope, Pi0) -> None:
@@ -565,7 +601,9 @@ class IncrementalSolver(SystemMixin):
     def _apply(self, a, d) -> None:
         inc = np.ascontiguousarray(a * d[:self.n])
         apply_increment(self.cor.ut, self.cor.Q, inc)
-        self.plates.z += a * d[self.n:, 2]
+        self.plates.z += a * d[self.n:self.n + self.P, 2]
+        if self.lat is not None:
+            self._set_periods(self.lat.periods + a * d[self.lat.rows, :3])
 
 def plates_for(z_bottom: float, z_top: float) -> list:
     """Two plates: fixed bottom (yarns above) and top (yarns below), both displacement-controlled."""

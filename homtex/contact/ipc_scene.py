@@ -97,10 +97,12 @@ class ContactScene:
         the search are left out until the next search.
     touch : (keys, rsum, gap) of the pairs found touching in the reference geometry by an earlier
         scene of the same frame (a continued solve); default: found here from the frame's nodes.
+    core : shell thickness of compressible yarns, mm (default 0): gaps are measured from the cores
+        (contact radius - core) and the enforcement's shell law acts over the shells.
     """
 
     def __init__(self, frame, plates: PlateState, pair_enf: Enforcement, plate_enf: Enforcement,
-                 friction: tuple, margin: float, touch: tuple | None = None):
+                 friction: tuple, margin: float, touch: tuple | None = None, core: float = 0.0):
         self.frame = frame
         self.n = frame.n_nodes
         self.plates = plates
@@ -111,9 +113,10 @@ class ContactScene:
         self.types, self.mu_table, self.mu_plate_type = friction
         r = frame.contact_radius
         self.margin = float(margin)
+        self.core = float(core)
         excl = arc_exclusions(frame, max(float(r.max()), 2.0 * pair_enf.ghat))
         self.broad = BroadPhase(frame.elements, r, frame.periods, frame.images, excl)
-        self.node_r = np.ascontiguousarray(frame.node_radius)
+        self.node_r = np.ascontiguousarray(frame.node_radius - self.core)
         # yarn type of each node (its first element) for the plate friction
         nt = np.zeros(self.n, dtype=np.int64)
         nt[frame.elements[::-1, 1]] = self.types[::-1]
@@ -145,6 +148,7 @@ class ContactScene:
         if not len(pr["a"]):
             return
         st = frame_stencil(self.frame, pr)
+        st.rsum -= 2.0 * self.core
         gap = pair_potential(x0, st, Enforcement("penalty", ghat=self.pair_enf.ghat, kappa=1.0), hessian=False).gap
         close = gap < self.pair_enf.ghat
         keys = self._keys(pr)[close]
@@ -165,6 +169,7 @@ class ContactScene:
         margin = self.margin if margin is None else float(margin)
         pr = self.broad.pairs(x, margin)
         st = frame_stencil(self.frame, pr)
+        st.rsum -= 2.0 * self.core
         if len(self.touch_keys) and len(st):
             keys = self._keys(pr)
             pos = np.minimum(np.searchsorted(self.touch_keys, keys), len(self.touch_keys) - 1)
@@ -187,7 +192,7 @@ class ContactScene:
     def covers(self, x: np.ndarray, reach: float) -> bool:
         """True if the candidates hold every pair that can come within ghat while nodes move by at
         most ``reach`` (mm) beyond x."""
-        return self.x_search is not None and 2.0 * (self.moved(x) + reach) + self.pair_enf.ghat < self.search_margin
+        return self.x_search is not None and 2.0 * (self.moved(x) + reach) + self.pair_enf.cutoff < self.search_margin
 
     def couplings(self, nodes=None) -> np.ndarray:
         """(p, 2) node pairs coupled by stencils ``nodes`` (c, S) (and every node with each
@@ -229,7 +234,7 @@ class ContactScene:
                "active": np.zeros(0, dtype=np.int64), "blocks": np.zeros((0, 6, 6)), "lam": np.zeros(len(gap))}
         if not self.P:
             return out
-        act = np.flatnonzero(gap < self.plate_enf.ghat)
+        act = np.flatnonzero(gap < self.plate_enf.cutoff)
         e, e1, e2 = self.plate_enf.energy(gap[act])
         out["energy"] = float(e.sum())
         out["active"] = act

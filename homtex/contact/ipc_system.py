@@ -1,5 +1,5 @@
-"""Assembly, evaluation and energy bookkeeping of :class:`~homtex.contact.incremental.IncrementalSolver`
-(a mixin: the solver's state lives there).
+"""Contact setup, assembly, evaluation and energy bookkeeping of
+:class:`~homtex.contact.incremental.IncrementalSolver` (a mixin: the solver's state lives there).
 
 The free-DOF system is :class:`~homtex.analysis.tangent.FreeSystem` with the node pairs of
 active contacts added to its pattern (it only grows; a contact block outside it rebuilds it),
@@ -25,6 +25,10 @@ from ..fem.corotational_system import element_matvec_serial, spin_between
 from ..linalg.solvers import blas_single_thread
 from .ccd import pair_step_bound, plate_step_bound
 from .friction import friction_potential
+from .ipc_scene import ContactScene, friction_setup
+from .lattice import LatticeScene, image_motion
+from .lattice_system import BorderedSystem
+from .potential import Enforcement
 
 __all__ = ["SystemMixin", "lag_change", "serial_numba"]
 
@@ -51,6 +55,32 @@ def serial_numba(small: bool):
 class SystemMixin:
     """Pattern, assembly, evaluation and ledger of the large-motion step solver."""
 
+    # ------------------------------------------------------------------ contact setup
+    def _contact_setup(self, frame, contact, friction_spec, initial) -> None:
+        """Enforcements (barrier, or barrier at the cores under compressible shells), friction
+        slip, search margins and the contact scene."""
+        r = frame.contact_radius
+        comp = contact.compression
+        h = 0.0
+        if comp is not None:
+            comp.check_radius(float(r.min()))
+            h = comp.shell
+        ghat = contact.barrier_gap * float(r.min() - h)
+        kappa = contact.barrier_stiffness or float(np.mean(frame.EA / frame.length))
+        enf = plate_enf = Enforcement("barrier", ghat=ghat, kappa=kappa)
+        if comp is not None:
+            enf = Enforcement("shell", ghat=ghat, kappa=kappa, **comp.pair_params())
+            plate_enf = Enforcement("shell", ghat=ghat, kappa=kappa, **comp.plate_params())
+        eps_v = contact.friction_slip if contact.friction_slip is not None else 1e-3 * float(r.min())
+        self.ghat, self.kappa, self.eps_v = ghat, kappa, eps_v
+        margin = contact.margin if contact.margin is not None else max(float(r.max()), 20.0 * ghat)
+        margin = max(margin, 2.0 * ghat, enf.cutoff + 2.0 * ghat)
+        args = (frame, self.plates, enf, plate_enf, friction_setup(frame, contact, friction_spec), margin)
+        kw = {"touch": None if initial is None else initial.touch, "core": h}
+        self.scene = LatticeScene(*args, driver=self.lat, **kw) if self.lat is not None else ContactScene(*args, **kw)
+        # the widest search: a node moves at most half of it per iteration
+        self.max_margin = max(self.scene.margin, 4.0 * float(r.max()))
+
     # ------------------------------------------------------------------ pattern and assembly
     def _pattern(self, nodes=None) -> None:
         """(Re)build the free-DOF pattern with the node pairs of stencils ``nodes`` (c, S) added
@@ -63,7 +93,13 @@ class SystemMixin:
             return
         allk = np.union1d(have, new)
         self._coupled = np.column_stack([allk // N, allk % N])
-        self.sys = FreeSystem(self.frame, self.mask, "ldl", couplings=self._coupled)
+        if self.lat is None:
+            self.sys = FreeSystem(self.frame, self.mask, "ldl", couplings=self._coupled)
+        else:                   # the lattice DOFs border the nodes' system
+            inner = self.mask.reshape(N, 6).copy()
+            inner[self.lat.rows] = True
+            self.sys = BorderedSystem(FreeSystem(self.frame, inner.ravel(), "ldl", couplings=self._coupled), self.lat,
+                                      self.free, self.frame.elements)
         pn = self.scene.plate_block_nodes(np.arange(self.n * self.P))
         self.plate_slots = self.sys.block_slots(pn) if len(pn) else np.zeros((0, 6, 6), dtype=np.int32)
         self.info.patterns += 1
@@ -89,13 +125,19 @@ class SystemMixin:
         s = self.prestrain_scale
         fint = self.cor.evaluate_tangent(s) if hessian else self.cor.evaluate(s)
         x = self.positions
+        xc = self._xc(x)
         z = self.plates.z
-        pc = self.scene.pairs(x, hessian, project=project)
+        n, P = self.n, self.P
+        pc = self.scene.pairs(xc, hessian, project=project)
         pl = self.scene.plate_terms(x, z, hessian)
         g = np.zeros((self.N, 6))
-        g[:self.n] = fint
-        g[:self.n, :3] += pc.grad + pl["grad"]
-        g[self.n:, 2] = pl["grad_plate"]
+        g[:n] = fint
+        g[:n, :3] += pl["grad"]
+        self._fold(pc.grad, g)
+        g[n:n + P, 2] = pl["grad_plate"]
+        if self.lat is not None:
+            g[self.lat.rows, :3] += self.lat.element_grad(self.cor.fe)
+            x_start = self._xc(x_start, self._p_start)
         ev = {"U": float(self.cor.energy.sum()), "B": pc.energy + pl["energy"], "pairs": pc, "plates": pl,
               "D": 0.0, "fric": [], "fint": fint, "terms": []}
         for t in self.terms:        # potentials scaled with the pre-strain: booked with the strain energy
@@ -108,17 +150,19 @@ class SystemMixin:
         for lg in lag:
             if lg is None or not len(lg):
                 continue
-            fr = friction_potential(lg, x, x_start, self.eps_v, hessian=hessian, project=project)
+            fr = friction_potential(lg, xc, x_start, self.eps_v, hessian=hessian, project=project)
             if hessian and eps_hessian > self.eps_v:
-                fr.hess = friction_potential(lg, x, x_start, eps_hessian, hessian=True, project=project).hess
+                fr.hess = friction_potential(lg, xc, x_start, eps_hessian, hessian=True, project=project).hess
             ev["D"] += fr.energy
             ev["fric"].append((lg, fr))
-            g[:self.n, :3] += fr.grad
+            self._fold(fr.grad, g)
         ev["g_contact"] = g[:, :3].copy()
-        ev["g_contact"][:self.n] -= fint[:, :3]
+        ev["g_contact"][:n] -= fint[:, :3]
         ev["fint"] = fint
-        g[:self.n] -= self.applied_loads()
-        g[self.n:, 2] -= self.plate_force
+        g[:n] -= self.applied_loads()
+        g[n:n + P, 2] -= self.plate_force
+        if self.lat is not None:
+            g[self.lat.rows, :3] -= self._lattice_loads()
         ev["g"] = g
         ev["Pi"] = ev["U"] + ev["B"] + ev["D"]
         return ev
@@ -131,7 +175,7 @@ class SystemMixin:
             self.M = self._lumped()
         pc, pl = ev["pairs"], ev["plates"]
         # slots first: a block outside the pattern rebuilds it (and the beam part with it)
-        slots = [self._slots(pc.hess_nodes) if pc.n_active else None]
+        slots = [self._slots(self._real(pc.hess_nodes)) if pc.n_active else None]
         fric = ev["fric"]
         slots += [self._friction_slots(lg) for lg, _ in fric]
         slots += [self._slots(nodes) for nodes, _ in ev.get("terms", ())]
@@ -140,10 +184,12 @@ class SystemMixin:
             sys.assemble(self.cor.Ke)
         if pc.n_active:
             sys.add_blocks(pc.hess, slots[0])
+            self._lattice_blocks(pc.hess, pc.hess_nodes)
         if len(pl["active"]):
             sys.add_blocks(pl["blocks"], self.plate_slots[pl["active"]])
         for (lg, fr), sl in zip(fric, slots[1:]):
             sys.add_blocks(fr.hess, sl)
+            self._lattice_blocks(fr.hess, lg.nodes)
         for (_, H), sl in zip(ev.get("terms", ()), slots[1 + len(fric):]):
             sys.add_blocks(H, sl)
         self._hmax = float(np.abs(sys.diagonal()).max(initial=0.0))
@@ -151,7 +197,7 @@ class SystemMixin:
     def _friction_slots(self, lg):
         cached = getattr(lg, "slots", None)
         if cached is None or cached[0] is not self.sys:
-            sl = self._slots(lg.nodes)
+            sl = self._slots(self._real(lg.nodes))
             lg.slots = (self.sys, sl)
         return lg.slots[1]
 
@@ -164,17 +210,26 @@ class SystemMixin:
             element_matvec_serial(p.node_ptr, p.inc_elem, p.inc_end, self.frame.elements, self.cor.Ke,
                                   np.ascontiguousarray(d[:self.n]), tmp)
             out[:self.n] = tmp
-        d3 = d[:, :3]
+        if self.lat is not None:
+            self.lat.element_hess_times(self.cor.Ke, d, out, self.frame.elements)
         pc, pl = ev["pairs"], ev["plates"]
-        blocks = [(pc.hess, pc.hess_nodes)] if pc.n_active else []
-        if len(pl["active"]):
-            blocks.append((pl["blocks"], self.scene.plate_block_nodes(pl["active"])))
-        blocks += [(fr.hess, lg.nodes) for lg, fr in ev["fric"] if len(lg)]
-        blocks += [(H, nodes) for nodes, H in ev.get("terms", ())]
-        for H, nodes in blocks:
-            v = d3[nodes].reshape(len(nodes), -1)
+        real = [(H, nodes) for nodes, H in ev.get("terms", ())]   # thread terms: over real nodes
+        if len(pl["active"]):           # plates: over (node, plate row) of the DOF arrays
+            real.append((pl["blocks"], self.scene.plate_block_nodes(pl["active"])))
+        for H, nodes in real:
+            v = d[:, :3][nodes].reshape(len(nodes), -1)
             hv = np.einsum("rij,rj->ri", H, v).reshape(len(nodes), -1, 3)
             np.add.at(out[:, :3], nodes.ravel(), hv.reshape(-1, 3))
+        blocks = [(pc.hess, pc.hess_nodes)] if pc.n_active else []
+        blocks += [(fr.hess, lg.nodes) for lg, fr in ev["fric"] if len(lg)]
+        if blocks:                      # pairs and friction: over the contact positions
+            dc = self._disp_c(d)
+            oc = np.zeros_like(dc)
+            for H, nodes in blocks:
+                v = dc[nodes].reshape(len(nodes), -1)
+                hv = np.einsum("rij,rj->ri", H, v).reshape(len(nodes), -1, 3)
+                np.add.at(oc, nodes.ravel(), hv.reshape(-1, 3))
+            self._fold(oc, out)
         return out
 
     def _lumped(self) -> np.ndarray:
@@ -191,15 +246,16 @@ class SystemMixin:
     def _factor(self, it, shrink: bool = True) -> bool:
         """Factor H + M / delta; ``shrink``: shrink delta until no negative pivot remains (else
         return whether the factor is positive definite)."""
-        base = self.sys.A.data.copy()
+        save = getattr(self.sys, "save", None)
+        base = save() if save is not None else self.sys.A.data.copy()
         for _ in range(40):
-            self.sys.A.data[:] = base
+            self._load(base)
             self.sys.add_diagonal(self.M / self.delta)
             self.sys.factor(inertia=True)
             if self.sys.negative == 0:
                 return True
             if not shrink:
-                self.sys.A.data[:] = base
+                self._load(base)
                 return False
             self.info.extra["indefinite"] = True        # the beams (not the contacts) buckle here
             self.delta = max(self.delta / 4.0, 1e-12)
@@ -238,13 +294,18 @@ class SystemMixin:
         passes through another or a plate; returns the amplitude applied (mm)."""
         x = self.positions
         d = amp * mode
-        dx, dz = d[:self.n, :3], d[self.n:, 2]
-        reach = float(np.sqrt(np.einsum("ij,ij->i", dx, dx)).max(initial=0.0))
+        dx, dz = d[:self.n, :3], d[self.n:self.n + self.P, 2]
+        dxc = self._disp_c(d)
+        reach = float(np.sqrt(np.einsum("ij,ij->i", dxc, dxc)).max(initial=0.0))
+        if self.lat is not None:            # the neighbouring cells' copies move with the lattice too
+            reach = max(reach, float(np.sqrt(np.einsum("ij,ij->i", dx, dx)).max(initial=0.0))
+                        + image_motion(d[self.lat.rows, :3]))
         if not self.scene.covers(x, reach):
             self._search(x, min(max(self.scene.margin, 2.2 * reach + 2.0 * self.ghat), self.max_margin))
         a = 1.0
         if len(self.scene.stencil):
-            a = min(a, pair_step_bound(x, dx, self.scene.stencil, eta=self.s.eta))
+            dxc = self._disp_c(d)           # (a search may have added virtual nodes)
+            a = min(a, pair_step_bound(self._xc(x), dxc, self.scene.stencil, eta=self.s.eta))
         if self.P:
             pn, pi = self.scene.plate_nodes, self.scene.plate_index
             a = min(a, plate_step_bound(x, dx, pn, self.scene.node_r[pn], self.plates.origins(), self.plates.normals(),
@@ -252,6 +313,12 @@ class SystemMixin:
                                         eta=self.s.eta))
         self._apply(a, d)
         return a * amp
+
+    def _load(self, base) -> None:
+        if hasattr(self.sys, "load"):
+            self.sys.load(base)
+        else:
+            self.sys.A.data[:] = base
 
     # ------------------------------------------------------------------ energy ledger
     def _start_ledger(self) -> None:
@@ -268,11 +335,16 @@ class SystemMixin:
         """(N, 6) forces the surroundings apply on prescribed DOFs and loaded DOFs (N, N mm)."""
         f = self.applied_loads()
         g = ev["g"].copy()
-        g[:self.n] += f
-        g[self.n:, 2] += self.plate_force
+        n, P = self.n, self.P
+        g[:n] += f
+        g[n:n + P, 2] += self.plate_force
+        if self.lat is not None:
+            g[self.lat.rows, :3] += self._lattice_loads()
         r = np.where(self.mask.reshape(self.N, 6), g, 0.0)
-        r[:self.n] += f
-        r[self.n:, 2] += self.plate_force
+        r[:n] += f
+        r[n:n + P, 2] += self.plate_force
+        if self.lat is not None:
+            r[self.lat.rows, :3] += self._lattice_loads()
         return r
 
     def _prestrain_rate(self) -> float:
@@ -286,7 +358,9 @@ class SystemMixin:
         du = np.zeros((self.N, 6))
         du[:self.n, :3] = self.cor.ut - snap[0]
         spin_between(self.cor.Q, snap[1], du[:self.n, 3:])
-        du[self.n:, 2] = self.plates.z - snap[2]
+        du[self.n:self.n + self.P, 2] = self.plates.z - snap[2]
+        if self.lat is not None:
+            du[self.lat.rows, :3] = self.lat.periods - snap[9]
         L = self.ledger
         L["external_work"] += 0.5 * float(np.sum((self._react + react) * du))
         rate = self._prestrain_rate()

@@ -276,5 +276,5 @@ def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, 
     set_status(ds, status, detail)
     ds.attrs["steps_done"] = int(n)
     if control == "displacement":
-        flag_force_drops(ds, what="compress")
+        flag_force_drops(ds, what="compress", model="nonlinear")
     return ds

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..model.compression import YarnCompression
 from ..validate import check_choice, check_int, check_number
 
 __all__ = ["Contact", "ENFORCEMENTS", "STRATEGIES"]
@@ -63,6 +64,10 @@ class Contact:
         below it a contact sticks elastically). Default: 1e-3 x the thinnest contact radius (1e-4 mm
         for 0.1 mm yarns): steps that slide a contact by less than eps_v see a friction force below
         mu N, so eps_v must stay well below the slip of a step on the thinnest yarns.
+    compression : a :class:`~homtex.model.compression.YarnCompression` (large-motion engine):
+        yarns with a soft shell over a hard core that flatten where they cross (force k delta^n
+        of the outer surfaces' overlap delta; the barrier acts at the cores). None (default):
+        solid yarns of their contact radius.
     max_forward_error : with the direct solver, each solve is refined once; a relative
         correction above this (an ill-conditioned system, e.g. a penalty far above the beam
         stiffness) raises SolverError instead of returning an inaccurate state.
@@ -90,38 +95,19 @@ class Contact:
     barrier_gap: float = 0.01
     barrier_stiffness: float | None = None
     friction_slip: float | None = None
+    compression: YarnCompression | None = None
 
-    def __post_init__(self):
-        def named(name):
-            return f"Contact option '{name}'"
+    def __setattr__(self, name, value):
+        """Every assignment is checked like the constructor's arguments: ``c.friction = -5`` raises
+        InputError instead of leaving an invalid option for a solve to ignore; an unknown name (a
+        typo such as ``c.fricton``) is refused too."""
+        check = _CHECKS.get(name)
+        if check is None:
+            raise InputError(f"Contact has no option {name!r}; options are {sorted(_CHECKS)}")
+        object.__setattr__(self, name, check(value))
 
-        check_choice(self.strategy, named("strategy"), STRATEGIES)
-        check_choice(self.enforcement, named("enforcement"), ENFORCEMENTS)
-        if self.penalty is not None:
-            self.penalty = check_number(self.penalty, named("penalty") + " (N/mm)", gt=0.0, le=1e15)
-        self.removal_fraction = check_number(self.removal_fraction, named("removal_fraction"), gt=0.0, le=1.0)
-        if self.margin is not None:
-            self.margin = check_number(self.margin, named("margin") + " (mm)", ge=0.0, le=1e6)
-        if self.exclude_hops is not None:
-            self.exclude_hops = check_int(self.exclude_hops, named("exclude_hops"), ge=1)
-        for name in ("gap_tol", "max_penetration", "detect_tol", "reuse_tol", "max_forward_error"):
-            setattr(self, name, check_number(getattr(self, name), named(name), gt=0.0))
-        self.penalty_growth_max = check_number(self.penalty_growth_max, named("penalty_growth_max"), ge=1.0)
-        for name in ("max_iter", "max_updates", "detect_rounds"):
-            setattr(self, name, check_int(getattr(self, name), named(name), ge=1, le=10 ** 6))
-        if not isinstance(self.reuse_amg, (bool, np.bool_)):
-            raise InputError(f"{named('reuse_amg')} must be True or False, got {self.reuse_amg!r}")
-        check_choice(self.initial_overlap, named("initial_overlap"), ("touch", "resolve"))
-        for name in ("friction", "plate_friction"):
-            if getattr(self, name) is not None:
-                setattr(self, name, check_number(getattr(self, name), named(name), ge=0.0, le=MAX_FRICTION))
-        self.barrier_gap = check_number(self.barrier_gap, named("barrier_gap") + " (relative to the smallest contact "
-                                        "radius)", gt=0.0, le=0.5)
-        if self.barrier_stiffness is not None:
-            self.barrier_stiffness = check_number(self.barrier_stiffness, named("barrier_stiffness") + " (N/mm)",
-                                                  gt=0.0, le=1e12)
-        if self.friction_slip is not None:
-            self.friction_slip = check_number(self.friction_slip, named("friction_slip") + " (mm)", gt=0.0, le=1.0)
+    def __delattr__(self, name):
+        raise InputError(f"Contact options cannot be deleted ({name!r}); set a value instead")
 
     @property
     def has_friction(self) -> bool:
@@ -129,8 +115,68 @@ class Contact:
         return bool((self.friction or 0.0) > 0.0 or (self.plate_friction or 0.0) > 0.0)
 
     def require_frictionless(self, what: str = "the linear contact solve") -> None:
-        """InputError if friction was asked for where only frictionless contact exists."""
+        """InputError if friction (or a compressible yarn law) was asked for where only
+        frictionless contact of solid yarns exists."""
+        if self.compression is not None:
+            raise InputError(f"Contact option 'compression': {what} has solid yarns; a compressible yarn law needs "
+                             "the large-motion engine, geometry=\"nonlinear\"")
         if self.has_friction:
             raise InputError(f"Contact option 'friction' = {self.friction!r} (plate_friction {self.plate_friction!r}): "
                              f"{what} is frictionless; Coulomb friction needs the large-motion engine, "
                              "geometry=\"nonlinear\"")
+
+
+def _named(name: str) -> str:
+    return f"Contact option '{name}'"
+
+
+def _optional(check):
+    return lambda v: None if v is None else check(v)
+
+
+def _bool(name):
+    def check(v):
+        if not isinstance(v, (bool, np.bool_)):
+            raise InputError(f"{_named(name)} must be True or False, got {v!r}")
+        return bool(v)
+    return check
+
+
+def _choice(name, choices):
+    return lambda v: check_choice(v, _named(name), choices)
+
+
+def _num(name, unit="", **bounds):
+    return lambda v: check_number(v, _named(name) + unit, **bounds)
+
+
+def _int(name, **bounds):
+    return lambda v: check_int(v, _named(name), **bounds)
+
+
+def _compression(v):
+    if v is not None and not isinstance(v, YarnCompression):
+        raise InputError(f"{_named('compression')} must be a homtex.YarnCompression or None, got {type(v).__name__}")
+    return v
+
+
+#: the check of every Contact option (run by the constructor and on every assignment)
+_CHECKS = {
+    "strategy": _choice("strategy", STRATEGIES),
+    "enforcement": _choice("enforcement", ENFORCEMENTS),
+    "penalty": _optional(_num("penalty", " (N/mm)", gt=0.0, le=1e15)),
+    "removal_fraction": _num("removal_fraction", gt=0.0, le=1.0),
+    "margin": _optional(_num("margin", " (mm)", ge=0.0, le=1e6)),
+    "exclude_hops": _optional(_int("exclude_hops", ge=1)),
+    **{name: _num(name, gt=0.0) for name in ("gap_tol", "max_penetration", "detect_tol", "reuse_tol",
+                                              "max_forward_error")},
+    "penalty_growth_max": _num("penalty_growth_max", ge=1.0),
+    **{name: _int(name, ge=1, le=10 ** 6) for name in ("max_iter", "max_updates", "detect_rounds")},
+    "reuse_amg": _bool("reuse_amg"),
+    "initial_overlap": _choice("initial_overlap", ("touch", "resolve")),
+    **{name: _optional(_num(name, ge=0.0, le=MAX_FRICTION)) for name in ("friction", "plate_friction")},
+    "barrier_gap": _num("barrier_gap", " (relative to the smallest contact radius)", gt=0.0, le=0.5),
+    "barrier_stiffness": _optional(_num("barrier_stiffness", " (N/mm)", gt=0.0, le=1e12)),
+    "friction_slip": _optional(_num("friction_slip", " (mm)", gt=0.0, le=1.0)),
+    "compression": _compression,
+}

@@ -64,7 +64,7 @@ def plate_potential(x, nodes, radius, origin, normal, enforcement: Enforcement, 
     o, nr = _plates(origin, normal)
     nodes, radius, plate = _plate_args(x, nodes, radius, plate, len(o))
     gap = np.einsum("ij,ij->i", x[nodes] - o[plate], nr[plate]) - radius
-    idx = np.flatnonzero(gap < enforcement.ghat)
+    idx = np.flatnonzero(gap < enforcement.cutoff)
     e, e1, e2 = enforcement.energy(gap[idx])
     nvec = nr[plate[idx]]
     grad = np.zeros_like(x)

@@ -9,7 +9,11 @@ plate g = n . (x - p) - r), all zero for g >= ghat and C2 there, kappa in N/mm:
   kappa g^2 / 2 - kappa ghat g / 2 + kappa ghat^2 / 6 for g < 0: a linear penalty of stiffness
   kappa whose contact surface sits at g = ghat / 2, rounded C2 over [0, ghat]; it tolerates
   penetration with a constant tangent stiffness kappa;
-* ``"cubic"``: kappa (ghat - g)^3 / (3 ghat) for all g < ghat (stiffens without bound).
+* ``"cubic"``: kappa (ghat - g)^3 / (3 ghat) for all g < ghat (stiffens without bound);
+* ``"shell"`` (a compressible yarn: a soft shell over a hard core; :mod:`.compression`): the
+  barrier at the cores' surfaces (g measured from the cores) plus a power law over the shells,
+  k / (n + 1) (s - g)^(n + 1) for g < s: the force k delta^n at an indentation delta = s - g of
+  the outer surfaces (s: the two shells' thickness), active from g < max(ghat, s).
 
 Pair energy (segments a = (x0, x1), b = (x2, x3); ``c`` = sin^2 of their angle; node weights
 alpha_v = 1 / deg(v), beta_v = (deg(v) - 1) / deg(v), deg = number of elements at the node):
@@ -51,16 +55,37 @@ from .psd import _project_psd, _project_single
 
 log = logging.getLogger(__name__)
 
-KINDS = {"barrier": 0, "penalty": 1, "cubic": 2}
+KINDS = {"barrier": 0, "penalty": 1, "cubic": 2, "shell": 3}
 
 
 # ----------------------------------------------------------------------------------------
 # enforcement functions of the gap
 @njit(cache=True, inline="always")
-def _phi(g, kind, kappa, ghat):
-    """(energy, d/dg, d2/dg2) of the enforcement at gap g."""
-    if g >= ghat:
+def _phi(g, kind, kp, cutoff):
+    """(energy, d/dg, d2/dg2) of the enforcement at gap g; kp = (kappa, ghat, shell, shell
+    stiffness, shell exponent) (:attr:`Enforcement.params`), cutoff the activation gap."""
+    if g >= cutoff:
         return 0.0, 0.0, 0.0
+    if kind == 3:
+        e, e1, e2 = 0.0, 0.0, 0.0
+        if g < kp[1]:
+            if g <= 0.0:
+                return np.inf, -np.inf, np.inf
+            dg = g - kp[1]
+            lg = np.log(g / kp[1])
+            e = -kp[0] * dg * dg * lg
+            e1 = -kp[0] * (2.0 * dg * lg + dg * dg / g)
+            e2 = -kp[0] * (2.0 * lg + 4.0 * dg / g - dg * dg / (g * g))
+        if g < kp[2]:
+            q = kp[2] - g
+            n = kp[4]
+            qn = q ** n
+            e += kp[3] * q * qn / (n + 1.0)
+            e1 -= kp[3] * qn
+            e2 += kp[3] * n * q ** (n - 1.0)
+        return e, e1, e2
+    kappa = kp[0]
+    ghat = cutoff
     if kind == 0:
         if g <= 0.0:
             return np.inf, -np.inf, np.inf
@@ -79,9 +104,9 @@ def _phi(g, kind, kappa, ghat):
 
 
 @njit(cache=True)
-def _phi_array(g, kind, kappa, ghat, e, e1, e2):
+def _phi_array(g, kind, kp, cutoff, e, e1, e2):
     for i in range(g.size):
-        e[i], e1[i], e2[i] = _phi(g[i], kind, kappa, ghat)
+        e[i], e1[i], e2[i] = _phi(g[i], kind, kp, cutoff)
 
 
 @njit(cache=True, inline="always")
@@ -105,9 +130,13 @@ class Enforcement:
 
     Parameters
     ----------
-    kind : "barrier", "penalty" or "cubic" (see the module docstring).
-    ghat : activation gap, mm (> 0): pairs with gap >= ghat carry no force.
+    kind : "barrier", "penalty", "cubic" or "shell" (see the module docstring).
+    ghat : activation gap, mm (> 0): pairs with gap >= ghat carry no force (``"shell"``: the
+        barrier's; the shell acts from gap ``shell``).
     kappa : stiffness, N/mm (> 0).
+    shell : ``"shell"``: thickness of the compressible shells over the cores, mm (the two of a
+        pair together; > 0). shell_stiffness : k of the force k delta^n, N/mm^n (> 0).
+    shell_exponent : n (>= 1).
     parallel_deg : (theta0, theta1) degrees: pairs closer to parallel than theta0 use the
         nodal (line-contact) form, pairs beyond theta1 the crossing form, a C2 blend between.
     project : project each pair's 12 x 12 Hessian block to positive semi-definite.
@@ -118,10 +147,20 @@ class Enforcement:
     kappa: float = 1.0
     parallel_deg: tuple = (1.0, 2.0)
     project: bool = True
+    shell: float = 0.0
+    shell_stiffness: float = 0.0
+    shell_exponent: float = 1.0
 
     def __post_init__(self):
         if self.kind not in KINDS:
             raise InputError(f"Enforcement.kind must be one of {sorted(KINDS)}, got {self.kind!r}")
+        if self.kind == "shell":
+            for name, lo in (("shell", 0.0), ("shell_stiffness", 0.0)):
+                v = getattr(self, name)
+                if not (np.isfinite(v) and v > lo):
+                    raise InputError(f"Enforcement.{name} must be positive and finite for kind 'shell', got {v!r}")
+            if not (np.isfinite(self.shell_exponent) and 1.0 <= self.shell_exponent <= 20.0):
+                raise InputError(f"Enforcement.shell_exponent must lie in [1, 20], got {self.shell_exponent!r}")
         for name in ("ghat", "kappa"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -136,6 +175,16 @@ class Enforcement:
         return KINDS[self.kind]
 
     @property
+    def cutoff(self) -> float:
+        """Activation gap, mm: terms with a larger gap carry no force."""
+        return max(self.ghat, self.shell) if self.kind == "shell" else self.ghat
+
+    @property
+    def params(self) -> np.ndarray:
+        """(5,) (kappa, ghat, shell, shell stiffness, shell exponent), as the kernels take them."""
+        return np.array([self.kappa, self.ghat, self.shell, self.shell_stiffness, self.shell_exponent], dtype=float)
+
+    @property
     def c_range(self):
         t0, t1 = np.radians(np.asarray(self.parallel_deg, dtype=float))
         return float(np.sin(t0) ** 2), float(np.sin(t1) ** 2)
@@ -145,7 +194,7 @@ class Enforcement:
         g = np.asarray(g, dtype=float)
         flat = np.ascontiguousarray(g.ravel())
         e, e1, e2 = (np.empty_like(flat) for _ in range(3))
-        _phi_array(flat, self.code, float(self.kappa), float(self.ghat), e, e1, e2)
+        _phi_array(flat, self.code, self.params, self.cutoff, e, e1, e2)
         return e.reshape(g.shape), e1.reshape(g.shape), e2.reshape(g.shape)
 
 
@@ -193,7 +242,7 @@ def _load_stencil(x, nodes, shift, q, P):
 
 
 @njit(cache=True)
-def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, tH, gc, Hc, Gp):
+def _pair_energy(P, R, al, be, kind, kp, ghat, c0, c1, hess, gout, Hout, tg, tH, gc, Hc, Gp):
     """Energy, gradient (gout) and Hessian (Hout) of one pair.
 
     Returns (E, lam, gap_ee, nterm, s, t, free_s, free_t): lam the pair's net normal force (N),
@@ -209,7 +258,7 @@ def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, 
                 Hout[i, j] = 0.0
     if gap_ee >= ghat:
         return 0.0, 0.0, gap_ee, 0, 0.0, 0.0, False, False
-    if kind == 0 and gap_ee <= 0.0:
+    if (kind == 0 or kind == 3) and gap_ee <= 0.0:
         return np.inf, np.inf, gap_ee, 0, 0.0, 0.0, False, False
     c = _sin2_angle(P, gc, Hc, 0)
     w, w1, w2 = _blend(c, c0, c1)
@@ -235,7 +284,7 @@ def _pair_energy(P, R, al, be, kind, kappa, ghat, c0, c1, hess, gout, Hout, tg, 
             continue
         d2 = _stencil_d2(P, s, t, fs, ft, tg, tH, hess)
         d = max(np.sqrt(d2), 1e-300)
-        e, e1, e2 = _phi(d - R, kind, kappa, ghat)
+        e, e1, e2 = _phi(d - R, kind, kp, ghat)
         nterm += 1
         s1, t1, fs1, ft1 = s, t, fs, ft
         E += W * e
@@ -287,7 +336,7 @@ def _pair_gaps_par(x, nodes, shift, rsum, nch, gap):
 
 
 @njit(cache=True)
-def _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+def _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, hess, project,
                      lo, hi, e_out, lam_out, g_out, H_out):
     P = np.empty((4, 3))
     tg = np.empty(12)
@@ -302,7 +351,7 @@ def _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat,
     for r in range(lo, hi):
         q = idx[r]
         _load_stencil(x, nodes, shift, q, P)
-        E, lam, gap, nterm, s, t, fs, ft = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kappa, ghat, c0,
+        E, lam, gap, nterm, s, t, fs, ft = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kp, ghat, c0,
                                                         c1, hess, g_out[r], Hl, tg, tH, gc, Hc, Gp)
         e_out[r] = E
         lam_out[r] = lam
@@ -315,19 +364,19 @@ def _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat,
 
 
 @njit(cache=True)
-def _pair_eval_ser(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+def _pair_eval_ser(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, hess, project,
                    e_out, lam_out, g_out, H_out):
     """Energy, net normal force, gradient (na, 12) and Hessian (na, 12, 12) of pairs idx."""
-    _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+    _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, hess, project,
                      0, idx.size, e_out, lam_out, g_out, H_out)
 
 
 @njit(cache=True, parallel=True)
-def _pair_eval_par(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project, nch,
+def _pair_eval_par(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, hess, project, nch,
                    e_out, lam_out, g_out, H_out):
     na = idx.size
     for ch in prange(nch):
-        _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kappa, ghat, c0, c1, hess, project,
+        _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, hess, project,
                          ch * na // nch, (ch + 1) * na // nch, e_out, lam_out, g_out, H_out)
 
 
@@ -497,7 +546,7 @@ def pair_potential(x, stencil: PairStencil, enforcement: Enforcement, hessian: b
     """Yarn-yarn contact potential, gradient and Hessian blocks at node positions x (n, 3), mm."""
     x = _positions(x, int(stencil.nodes.max()) + 1 if len(stencil) else None)
     gap = pair_gaps(x, stencil)
-    idx = np.flatnonzero(gap < enforcement.ghat).astype(np.int64)
+    idx = np.flatnonzero(gap < enforcement.cutoff).astype(np.int64)
     na = len(idx)
     e = np.zeros(na)
     lam_a = np.zeros(na)
@@ -506,7 +555,7 @@ def pair_potential(x, stencil: PairStencil, enforcement: Enforcement, hessian: b
     c0, c1 = enforcement.c_range
     if na:
         args = (x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
-                enforcement.code, float(enforcement.kappa), float(enforcement.ghat), c0, c1, hessian,
+                enforcement.code, enforcement.params, enforcement.cutoff, c0, c1, hessian,
                 bool(enforcement.project))
         if _parallel(na, "eval"):
             _pair_eval_par(*args, _chunks(na), e, lam_a, g, H)

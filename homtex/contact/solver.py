@@ -174,7 +174,7 @@ class ContactSolver(ActiveSets, LinearSystems):
         pl = self.plates[p]
         i = 6 * (self.n + p) + 2
         if force is not None:
-            pl.force, pl.displacement = float(force), None
+            pl.displacement, pl.force = None, float(force)      # in this order: a Plate checks every assignment
             self.mask[i] = False
             self.up[i] = 0.0
             self.f[i] = pl.normal * float(force)

@@ -5,9 +5,11 @@ r1 along the current chord, r3 = r1 x p / |r1 x p| with p the mean of the two ro
 e2, r2 = r3 x r1 (the element-independent co-rotational frame of Battini and Pacoste 2002). In Er
 the element is the linear Timoshenko beam of :mod:`homtex.fem.beam`, loaded only by its stretch
 l - l0 and its end *deformational* rotations theta_a = log(Er^T Q_a E0^T) (Q_a: rotation of node a
-from the start, E0: initial element frame). Rigid motions of any size leave l - l0 and theta
-unchanged, so they give exactly zero force; rotations within an element must stay moderate
-(a few tenths of a radian), which mesh refinement ensures.
+from the start, E0: the end's rest frame: the initial element frame when the start geometry is
+stress-free, else the frame a rest state gives it, :mod:`homtex.model.rest`; l0 the rest length).
+Rigid motions of any size leave l - l0 and theta unchanged, so they give exactly zero force;
+rotations within an element must stay moderate (a few tenths of a radian), which mesh refinement
+ensures.
 
 Internal forces are the exact gradient of the element energy
 U = EA l0 / 2 ((l - l0) / l0 + eps0)^2 + 1/2 theta . K_theta theta
@@ -218,14 +220,17 @@ def _mat_jac_t(A, M, out, scale):
 
 
 @njit(cache=True)
-def element_kernel(xi, xj, Qi, Qj, E0, L0, EA, GJ, EIy, EIz, kGA, eps0,
+def element_kernel(xi, xj, Qi, Qj, E0i, E0j, L0, EA, GJ, EIy, EIz, kGA, eps0,
                    fe, Ke, fl, Er, th, ws, vs, ms, want_tangent):
     """Internal forces (and the consistent tangent) of one co-rotational element.
 
     Parameters
     ----------
     xi, xj : (3,) current end positions (xj with the periodic shift), mm.
-    Qi, Qj : (3, 3) nodal rotations. E0 : (3, 3) initial frame (rows e1, e2, e3).
+    Qi, Qj : (3, 3) nodal rotations. E0i, E0j : (3, 3) rest frames of the two ends (rows e1, e2,
+        e3): the end is stress-free when Q E0^T equals the co-rotated frame (both the element's
+        initial frame when the start geometry is the rest state; see :mod:`homtex.model.rest`).
+    L0 : rest length, mm.
     fe : out (2, 6) forces/moments on the two nodes (internal force vector), N, N mm.
     Ke : out (12, 12) d fe / d(x_i, w_i, x_j, w_j) (spatial spins), if ``want_tangent``.
     fl : out (12,) local end forces in Er. Er : out (3, 3) rows r1, r2, r3.
@@ -246,8 +251,8 @@ def element_kernel(xi, xj, Qi, Qj, E0, L0, EA, GJ, EIy, EIz, kGA, eps0,
     # rotated initial axes: T = Q E0^T (columns)
     for a in range(3):
         for b in range(3):
-            Ti[a, b] = Qi[a, 0] * E0[b, 0] + Qi[a, 1] * E0[b, 1] + Qi[a, 2] * E0[b, 2]
-            Tj[a, b] = Qj[a, 0] * E0[b, 0] + Qj[a, 1] * E0[b, 1] + Qj[a, 2] * E0[b, 2]
+            Ti[a, b] = Qi[a, 0] * E0i[b, 0] + Qi[a, 1] * E0i[b, 1] + Qi[a, 2] * E0i[b, 2]
+            Tj[a, b] = Qj[a, 0] * E0j[b, 0] + Qj[a, 1] * E0j[b, 1] + Qj[a, 2] * E0j[b, 2]
     for a in range(3):
         ti[a] = Ti[a, 1]
         tj[a] = Tj[a, 1]
@@ -453,8 +458,8 @@ def _one_element(e, x, Q, elements, shift, E0, L0, EA, GJ, EIy, EIz, kGA, eps0,
     for a in range(3):
         xj[a] = x[j, a] + shift[e, a]
     fl = forces[e]
-    lcur[e] = element_kernel(x[i], xj, Q[i], Q[j], E0[e], L0[e], EA[e], GJ[e], EIy[e], EIz[e], kGA[e],
-                             eps0[e], fe[e], Ke[e] if want_tangent else Ke[0], fl, Rr[e], theta[e], ws, vs, ms,
+    lcur[e] = element_kernel(x[i], xj, Q[i], Q[j], E0[e, 0], E0[e, 1], L0[e], EA[e], GJ[e], EIy[e], EIz[e],
+                             kGA[e], eps0[e], fe[e], Ke[e] if want_tangent else Ke[0], fl, Rr[e], theta[e], ws, vs, ms,
                              want_tangent)
     end_energy(fl, L0[e], EA[e], GJ[e], EIy[e], EIz[e], kGA[e], energy[e])
 
@@ -468,7 +473,8 @@ def corotational_response(x, Q, elements, shift, E0, L0, EA, GJ, EIy, EIz, kGA, 
     ----------
     x : (n, 3) current node positions, mm. Q : (n, 3, 3) nodal rotations from the start.
     shift : (m, 3) offset of each element's second node (periodic images), mm.
-    E0 : (m, 3, 3) initial element frames (rows e1, e2, e3). L0 : (m,) initial lengths, mm.
+    E0 : (m, 2, 3, 3) rest frames of both ends (rows e1, e2, e3; the initial element frame twice
+        when the start geometry is stress-free). L0 : (m,) rest lengths, mm.
     eps0 : (m,) pre-strain (tension positive).
     fe : out (m, 2, 6) forces and moments the element exerts on its two nodes' DOFs
         (internal force vector: the residual is f_ext - sum fe).

@@ -110,61 +110,71 @@ def yarn_overlaps(frame: Frame, *, tol: float = 1e-9, arc_exclusion: float = 3.0
     -------
     structured array with fields element_a, element_b, yarn_a, yarn_b (int64),
     depth (mm, r1 + r2 - distance > tol) and image (k,) of b, sorted by depth
-    (largest first); each pair once.
+    (largest first, ties in element order); each pair once.
+
+    The candidates come from points sampled along every element at most ``h`` apart
+    (``h`` = the largest contact diameter, or a quarter of the mean element length if that is
+    larger), searched within ``h + 2 max(r)``: the search radius no longer grows with the
+    longest element, so a cell with a few long and many short elements stays linear in its
+    size (searching element midpoints within the longest element's length made a spacer cell
+    with ``pile_segments = 2000`` take 9 s and 2.6 GB).
     """
     x0 = frame.nodes[frame.elements[:, 0]]
     d = frame.element_vectors
     rc = frame.contact_radius
-    mid = x0 + 0.5 * d
+    L = frame.length
+    m = len(L)
     k = frame.dim_periodic
     imgs = np.array(np.meshgrid(*[[-1, 0, 1]] * k, indexing="ij")).reshape(k, -1).T if k else np.zeros((1, 0))
     imgs = imgs.astype(np.int64)
     shifts = imgs @ frame.periods if k else np.zeros((1, 3))
-    reach = float(frame.length.max() + 2.0 * rc.max())
-    tree = cKDTree(mid)
+    # samples: every point of an element lies within h/2 of one of its samples, so two elements
+    # closer than r_a + r_b have samples closer than h + r_a + r_b; at most about 5 m samples
+    h = max(2.0 * float(rc.max()), float(L.sum()) / (4.0 * m)) if m else 1.0
+    per = np.maximum(1, np.ceil(L / h)).astype(np.int64)
+    owner = np.repeat(np.arange(m, dtype=np.int64), per)
+    first = np.cumsum(per) - per
+    frac = (np.arange(len(owner)) - first[owner] + 0.5) / per[owner]
+    pts = x0[owner] + frac[:, None] * d[owner]
+    reach = h + 2.0 * float(rc.max())
+    # same yarn: neighbours along the yarn are never overlaps (arc length of each midpoint from
+    # the yarn's first element, the yarn's total length for closed / periodic chains)
+    cum = np.cumsum(L) - L
+    _, first_el, ids = np.unique(frame.yarn, return_index=True, return_inverse=True)
+    tot = np.bincount(ids, weights=L)[ids]
+    s_loc = cum + 0.5 * L - cum[first_el[ids]]
+    # each unordered pair once: a < b, or a == b with a "positive" image (first nonzero entry > 0)
+    positive = np.array([next((int(v) for v in row if v != 0), 0) > 0 for row in imgs], dtype=bool)
+
+    def candidates(a, b, q):
+        keep = (a < b) | ((a == b) & positive[q])
+        a, b = a[keep], b[keep]
+        same = frame.yarn[a] == frame.yarn[b]
+        ds = np.abs(s_loc[a] - s_loc[b])
+        ds = np.minimum(ds, tot[a] - ds)
+        near = same & (ds < arc_exclusion * (rc[a] + rc[b]) + 0.5 * (L[a] + L[b]))
+        key = np.unique(a[~near] * m + b[~near])
+        return key // m, key % m
+
+    tree = cKDTree(pts)
     ea, eb, ei = [], [], []
     for q, sh in enumerate(shifts):
-        # sparse distance matrix between the original midpoints and the shifted ones
-        other = cKDTree(mid + sh)
+        # sparse distance matrix between the original samples and the shifted ones -> element pairs
+        other = cKDTree(pts + sh)
         sdm = tree.sparse_distance_matrix(other, reach, output_type="coo_matrix")
-        a, b = sdm.row.astype(np.int64), sdm.col.astype(np.int64)
+        a, b = candidates(owner[sdm.row], owner[sdm.col], q)
         ea.append(a)
         eb.append(b)
         ei.append(np.full(len(a), q))
     a = np.concatenate(ea)
     b = np.concatenate(eb)
     qi = np.concatenate(ei)
-    # each unordered pair once: a < b, or a == b with a "positive" image
-    img = imgs[qi]
-    zero = np.all(img == 0, axis=1)
-    if k:
-        first = np.zeros(len(img), dtype=np.int64)
-        for c in range(k - 1, -1, -1):
-            first = np.where(img[:, c] != 0, img[:, c], first)
-    else:
-        first = np.zeros(len(img), dtype=np.int64)
-    keep = (a < b) | ((a == b) & ~zero & (first > 0))
-    a, b, qi = a[keep], b[keep], qi[keep]
-    # same yarn: exclude neighbours along the yarn
-    same = frame.yarn[a] == frame.yarn[b]
-    if same.any():
-        L = frame.length
-        cum = np.cumsum(L) - L                     # arc length at the start of each element
-        _, first_el = np.unique(frame.yarn, return_index=True)
-        ids = np.searchsorted(np.unique(frame.yarn), frame.yarn)
-        tot = np.bincount(ids, weights=L)
-        s_loc = cum + 0.5 * L - cum[first_el[ids]]   # midpoint arc length from the yarn's first element
-        tot = tot[ids]
-        ds = np.abs(s_loc[a] - s_loc[b])
-        ds = np.minimum(ds, tot[a] - ds)
-        near = same & (ds < arc_exclusion * (rc[a] + rc[b]) + 0.5 * (L[a] + L[b]))
-        a, b, qi = a[~near], b[~near], qi[~near]
     sh = shifts[qi]
     dist, _, _ = segment_distances(x0[a], d[a], x0[b] + sh, d[b])
     depth = rc[a] + rc[b] - dist
     hit = depth > tol
     a, b, qi, depth = a[hit], b[hit], qi[hit], depth[hit]
-    order = np.argsort(-depth, kind="stable")
+    order = np.lexsort((qi, b, a, -depth))     # deepest first; ties in element order
     out = np.zeros(len(order), dtype=[("element_a", np.int64), ("element_b", np.int64),
                                       ("yarn_a", np.int64), ("yarn_b", np.int64),
                                       ("depth", float), ("image", np.int64, (k,))])

@@ -77,7 +77,7 @@ def parse_lapping(text: str, bar: str = "bar", bed: str = "front") -> list[Cours
     ------
     InputError naming the bar and the offending token.
     """
-    if bed not in ("front", "back", "both"):
+    if not isinstance(bed, str) or bed not in ("front", "back", "both"):
         raise InputError(f"bar {bar!r}: bed must be 'front', 'back' or 'both', got {bed!r}")
     if not isinstance(text, str):
         raise InputError(f"bar {bar!r}: lapping must be a string like '1-0/0-1//', got {text!r}")

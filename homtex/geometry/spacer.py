@@ -80,11 +80,12 @@ from scipy.spatial import cKDTree
 from ..errors import CellError, InputError
 from ..model.frame import Frame
 from ..model.sections import YarnType, yarn_fields
-from ..validate import check_keys, check_size, get_int, get_number, get_str, get_table
+from ..validate import check_int, check_keys, check_size, get_int, get_number, get_str, get_table
 from .curves import catmull_rom_periodic, overlap_summary, reference_vectors, wrap_chain, yarn_overlaps
 from .lapping import Bar, as_bar, lcm, parse_lapping, parse_threading
 
-__all__ = ["INCH", "SHAPE_DEFAULTS", "build_cell", "layer_levels", "spacer_fabric"]
+__all__ = ["INCH", "MAX_ELEMENTS_PER_SEGMENT", "MAX_PILE_SEGMENTS", "SHAPE_DEFAULTS", "build_cell", "layer_levels",
+           "spacer_fabric"]
 
 INCH = 25.4  # mm
 
@@ -200,6 +201,14 @@ class _Loops:
                                     [gap * self.w, y0 + sh["inlay_to"] * cs, d]])
 
 
+#: largest resolution of a spacer cell: beams per control segment and segments per pile leg. At
+#: the limits a pile leg of the 20 mm cell has 5000 beams 4 um long (40x shorter than the yarn is
+#: thick, far beyond what beam theory or the convergence studies need); a cell file asking for
+#: more is refused before anything is built
+MAX_ELEMENTS_PER_SEGMENT = 50
+MAX_PILE_SEGMENTS = 100
+
+
 def _check_numbers(gauge, courses_per_cm, thickness, elements_per_segment, pile_segments, shape):
     """Validated (gauge, courses/cm, thickness, elements per segment, pile segments, shape)."""
     try:
@@ -211,12 +220,8 @@ def _check_numbers(gauge, courses_per_cm, thickness, elements_per_segment, pile_
     for nm, v in (("gauge", gauge), ("courses_per_cm", cpc), ("thickness", T)):
         if not (np.isfinite(v) and v > 0):
             raise InputError(f"{nm} must be positive and finite, got {v}")
-    eps = int(elements_per_segment)
-    if eps < 1 or eps != elements_per_segment:
-        raise InputError(f"elements_per_segment must be an integer >= 1, got {elements_per_segment}")
-    nleg = int(pile_segments)
-    if nleg < 1 or nleg != pile_segments:
-        raise InputError(f"pile_segments must be an integer >= 1, got {pile_segments}")
+    eps = check_int(elements_per_segment, "elements_per_segment", ge=1, le=MAX_ELEMENTS_PER_SEGMENT)
+    nleg = check_int(pile_segments, "pile_segments", ge=1, le=MAX_PILE_SEGMENTS)
     sh = dict(SHAPE_DEFAULTS)
     if shape:
         unknown = sorted(set(shape) - set(SHAPE_DEFAULTS))
@@ -398,8 +403,8 @@ def spacer_fabric(gauge: float, courses_per_cm: float, thickness: float, bars, y
     bars : list of :class:`Bar` (or dicts with name, lapping, yarn, bed, threading, system),
         or a dict name -> table.
     yarns : dict name -> :class:`~homtex.YarnType` (the bars' ``yarn`` names).
-    elements_per_segment : beams per control segment (resolution).
-    pile_segments : control segments along each pile leg between the layers.
+    elements_per_segment : beams per control segment (resolution), 1 .. 50.
+    pile_segments : control segments along each pile leg between the layers, 1 .. 100.
     shape : overrides of :data:`SHAPE_DEFAULTS`.
     check_overlaps : compute :func:`yarn_overlaps` and warn if any.
     bond_distance : mm; > 0 adds interlacing bonds: a connector beam (ground yarn's material,
@@ -536,8 +541,8 @@ def build_cell(parameters: dict, yarns: dict[str, YarnType], resolution: dict) -
         shape ({key: value}, see :data:`SHAPE_DEFAULTS`); ``seam`` (a table read by
         :func:`homtex.seam_profile`, ignored here).
     yarns : yarn types by name.
-    resolution : the [resolution] table: elements_per_segment (default 4), pile_segments
-        (default 4).
+    resolution : the [resolution] table: elements_per_segment (default 4, at most 50), pile_segments
+        (default 4, at most 100).
 
     Returns
     -------
@@ -551,21 +556,22 @@ def build_cell(parameters: dict, yarns: dict[str, YarnType], resolution: dict) -
     thickness = get_number(p, "thickness", t, gt=0, le=1000)      # mm
     bond = get_number(p, "bond_distance", t, default=0.0, ge=0, le=100)
     bars = get_table(p, "bars", t)
+    seam = get_table(p, "seam", t, required=False)
     for name, spec in bars.items():
         spec = get_table(bars, name, f"{t}.bars")
-        if spec.get("yarn") == (p.get("seam") or {}).get("yarn"):
+        if spec.get("yarn") == seam.get("yarn"):
             raise CellError(f"yarn {spec.get('yarn')!r} is the seam's stitch yarn", table=f"{t}.bars.{name}",
                             key="yarn")
         for key in ("lapping", "yarn", "bed", "threading", "system"):
             if key in spec:
                 get_str(spec, key, f"{t}.bars.{name}")
-    _check_seam_table(get_table(p, "seam", t, required=False), yarns)
+    _check_seam_table(seam, yarns)
     shape = get_table(p, "shape", t, required=False)
     for key in shape:
         get_number(shape, key, f"{t}.shape")
     res = dict(resolution or {})
     check_keys(res, ("elements_per_segment", "pile_segments"), "resolution")
-    eps = get_int(res, "elements_per_segment", "resolution", default=4, ge=1)
-    nleg = get_int(res, "pile_segments", "resolution", default=4, ge=1)
+    eps = get_int(res, "elements_per_segment", "resolution", default=4, ge=1, le=MAX_ELEMENTS_PER_SEGMENT)
+    nleg = get_int(res, "pile_segments", "resolution", default=4, ge=1, le=MAX_PILE_SEGMENTS)
     return spacer_fabric(gauge, cpc, thickness, bars, yarns, elements_per_segment=eps, pile_segments=nleg,
                          shape=shape or None, bond_distance=bond)

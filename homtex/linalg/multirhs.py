@@ -19,22 +19,17 @@ import time
 import numba
 import numpy as np
 import scipy.sparse as sp
-from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
-from pyamg.util.linalg import approximate_spectral_radius
 from scipy.sparse.linalg import splu
 
 from ..errors import SolverError
 from .krylov import BlockOperator, _cg_update, _coldot, _p_update, _row_scale
+from .parallel_amg import chebyshev_coefficients
 from .solvers import SolveReport, blas_single_thread, convergence_error
 
 __all__ = ["BatchedVCycle", "block_pcg", "solve_many"]
 
 
-def _chebyshev_coefficients(A, degree: int) -> np.ndarray:
-    """pyamg's Chebyshev smoother coefficients for level matrix A (its cached rho)."""
-    rho = approximate_spectral_radius(A)  # cached on A by pyamg's own smoother setup
-    # pyamg's setup_chebyshev: bounds rho/30 and 1.1 rho, constant coefficient dropped
-    return -chebyshev_polynomial_coefficients(rho / 30.0, rho * 1.1, degree)[:-1]
+_chebyshev_coefficients = chebyshev_coefficients
 
 
 class BatchedVCycle:

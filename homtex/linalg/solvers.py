@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numba import njit, prange
 
 from ..config import option
@@ -33,6 +32,8 @@ except Exception:  # pragma: no cover - depends on the machine
     _cholmod = None
 
 from threadpoolctl import ThreadpoolController
+
+from .amg import SINGULAR, ScaledAMG, amg_hierarchy, singular_error  # noqa: F401  (re-exported: their home was here)
 
 METHODS = ("amg", "direct", "cg")
 
@@ -135,67 +136,6 @@ def pcg(A, b, M, *, x0=None, tol: float = 1e-10, maxiter: int = 1000):
     return x, hist
 
 
-class ScaledAMG:
-    """Smoothed-aggregation hierarchy of the symmetrically scaled operator D^-1/2 A D^-1/2.
-
-    Beam frames mix translations (mm) and rotations (rad), so the diagonal of A spans many
-    orders of magnitude; Chebyshev smoothing needs a good spectral bound and gets it only
-    after scaling (measured: 131 -> 16 CG iterations on a 17k-DOF octet block). The near-null
-    space is scaled the other way (D^1/2 B) so it stays the null space of the scaled operator.
-    Used as a preconditioner for CG on the unscaled A, so residuals stay in physical units.
-    """
-
-    def __init__(self, A, B, *, max_coarse: int = 3000, degree: int = 3):
-        """max_coarse: largest coarse grid in unknowns (solved directly); degree: Chebyshev."""
-        import pyamg
-
-        d = np.asarray(A.diagonal(), dtype=float)
-        if np.any(d <= 0):
-            i = int(np.flatnonzero(d <= 0)[0])
-            raise SolverError(f"non-positive diagonal {d[i]:.3g} at DOF {i} (node {i // 6}, "
-                              f"local DOF {i % 6}): the operator is not positive definite")
-        self.scale = 1.0 / np.sqrt(d)
-        S = sp.diags(self.scale)
-        As = S @ A @ S
-        if isinstance(A, sp.bsr_matrix):
-            As = sp.bsr_matrix(As, blocksize=A.blocksize)
-        Bs = None if B is None else np.asarray(B) / self.scale[:, None]
-        cheb = ("chebyshev", {"degree": degree})
-        # pyamg counts max_coarse in block rows (6x6 blocks here), not unknowns: without the
-        # division the coarse splu got up to 6000 unknowns (measured on a 98k-DOF periodic octet
-        # cell: 2 levels, a 5184-unknown coarse grid, 1.0 s lazy factorisation in the first
-        # solve, V-cycles 1.8x slower). 3000 unknowns kept the iteration counts of a slender
-        # tower (31) and a BCC block (368) that 1000 raised to 143 and 426.
-        bs = A.blocksize[0] if isinstance(As, sp.bsr_matrix) else 1
-        self.ml = pyamg.smoothed_aggregation_solver(
-            As, B=Bs, symmetry="symmetric", strength=("symmetric", {"theta": 0.0}),
-            presmoother=cheb, postsmoother=cheb, improve_candidates=None,
-            max_coarse=max(1, int(max_coarse) // bs), coarse_solver="splu")
-        self.shape = A.shape
-        self.degree = degree  # Chebyshev degree (homtex.krylov rebuilds the smoother from it)
-
-    def operator_complexity(self) -> float:
-        return float(self.ml.operator_complexity())
-
-    @property
-    def levels(self):
-        return self.ml.levels
-
-    def aspreconditioner(self, cycle: str = "V") -> spla.LinearOperator:
-        inner = self.ml.aspreconditioner(cycle=cycle)
-        s = self.scale
-
-        def apply(r):
-            return s * inner.matvec(s * np.ravel(r))
-
-        return spla.LinearOperator(self.shape, matvec=apply, dtype=float)
-
-
-def amg_hierarchy(A, B, *, max_coarse: int = 3000, degree: int = 3) -> ScaledAMG:
-    """pyamg smoothed aggregation tuned for beam frames (see :class:`ScaledAMG`)."""
-    return ScaledAMG(A, B, max_coarse=max_coarse, degree=degree)
-
-
 class LinearSolver:
     """Solves A x = b for one operator, many right-hand sides, setup once.
 
@@ -206,10 +146,17 @@ class LinearSolver:
     B : (ndof, 6) near-null space for AMG (rigid-body modes)
     tol : relative residual ||b - A x|| / ||b|| to reach
     maxiter : CG iteration limit (default 1000 for amg, 5000 for cg)
+    hierarchy : a :class:`ScaledAMG` to reuse (built for a nearby operator; CG runs on A)
+    cycle : "numba" (the V-cycle applied directly with parallel numba kernels,
+        :mod:`homtex.linalg.parallel_amg`), "pyamg", or "gpu" (:mod:`homtex.linalg.gpu`, CuPy)
+        (default: option ``amg_cycle``)
+    precision : "float64" or "float32" level matrices in the numba V-cycle (option ``amg_precision``)
+    node_graph : node graph aggregated on the finest level (see :class:`ScaledAMG`)
     """
 
     def __init__(self, A, *, method: str = "amg", B=None, tol: float | None = None,
-                 maxiter: int | None = None, hierarchy=None):
+                 maxiter: int | None = None, hierarchy=None, cycle: str | None = None,
+                 precision: str | None = None, node_graph=None):
         if method not in METHODS:
             raise InputError(f"solver must be one of {METHODS}, got {method!r}")
         self.A = A
@@ -226,9 +173,26 @@ class LinearSolver:
             if method == "amg":
                 # a reused hierarchy (built for a nearby operator) is still a valid SPD
                 # preconditioner; CG runs on the new A, so the answer stays exact
-                self.ml = hierarchy if hierarchy is not None else amg_hierarchy(A, B)
+                self._cache = None
+                if hierarchy is None and option("amg_reuse"):
+                    from .reuse import CACHE
+
+                    hierarchy, self.reused = CACHE.get(A, B, node_graph=node_graph)
+                    self._cache = CACHE
+                self.ml = hierarchy if hierarchy is not None else amg_hierarchy(A, B, node_graph=node_graph)
                 self.M = self.ml.aspreconditioner(cycle="V")
                 self.operator_complexity = float(self.ml.operator_complexity())
+                self.cycle = option("amg_cycle", cycle)
+                if self.cycle == "gpu":
+                    from .gpu import DeviceAMG
+
+                    self.device = DeviceAMG(self.ml, A, device="gpu",
+                                            precision=option("amg_precision", precision))
+                elif self.cycle == "numba":
+                    from .parallel_amg import BSROperator, VCycle
+
+                    self.vcycle = VCycle(self.ml, precision=option("amg_precision", precision))
+                    self.Aop = BSROperator(A if isinstance(A, sp.bsr_matrix) else sp.csr_matrix(A))
             elif method == "cg":
                 d = A.diagonal()
                 inv = 1.0 / d
@@ -249,9 +213,7 @@ class LinearSolver:
                         self.factor = splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A",
                                            diag_pivot_thresh=0.0, options={"SymmetricMode": True})
                     except RuntimeError as err:   # "Factor is exactly singular"
-                        raise SolverError(f"SuperLU factorisation failed ({err}): the matrix is singular - a "
-                                          "part of the structure that nothing holds, or an element of zero "
-                                          "stiffness") from err
+                        raise singular_error("direct (superlu)", err) from err
                     self.backend = "superlu"
         self.setup_seconds = time.perf_counter() - t0
 
@@ -284,8 +246,15 @@ class LinearSolver:
                 xs = self.factor(bs) if self.backend == "cholmod" else self.factor.solve(bs)
                 rep.method = f"direct ({self.backend})"
             else:
-                xs = self._iterate(bs, None if x0 is None else np.asarray(x0, dtype=float) / scale, nb, rep)
+                try:
+                    xs = self._iterate(bs, None if x0 is None else np.asarray(x0, dtype=float) / scale, nb, rep)
+                except RuntimeError as err:   # a factorisation inside the preconditioner (a foreign hierarchy)
+                    if isinstance(err, SolverError):
+                        raise
+                    raise singular_error(self.method, err, coarse=self.method == "amg") from err
         rep.solve_seconds = time.perf_counter() - t0
+        if getattr(self, "_cache", None) is not None:
+            self._cache.record(self.A, rep.iterations, rep.solve_seconds)
         if not np.all(np.isfinite(xs)):
             raise SolverError(f"{rep.method} solve produced non-finite values "
                               f"(singular or indefinite matrix?)", history=rep.history, report=rep)
@@ -309,13 +278,36 @@ class LinearSolver:
     def _iterate(self, bs, x0, nb, rep):
         """Preconditioned CG on the scaled right-hand side, restarted from the current x (at most
         twice) while the true residual misses both criteria although the recurrence met them."""
-        xs, hist = pcg(self.A, bs, self.M, x0=x0, tol=self.tol, maxiter=self.maxiter)
+        if getattr(self, "cycle", None) == "gpu":
+            xp = self.device.xp
+
+            def run(x_start, maxiter):
+                x, h = self.device.pcg(xp.asarray(bs), x0=None if x_start is None else xp.asarray(x_start),
+                                       tol=self.tol, maxiter=maxiter)
+                return xp.asnumpy(x), h
+        elif getattr(self, "cycle", None) == "numba":
+            import numba
+
+            from .parallel_amg import cg_threads
+            from .parallel_amg import pcg as fast_pcg
+
+            def run(x_start, maxiter):
+                old = numba.get_num_threads()
+                numba.set_num_threads(cg_threads(option("amg_threads")))
+                try:
+                    return fast_pcg(self.Aop, bs, self.vcycle, x0=x_start, tol=self.tol, maxiter=maxiter)
+                finally:
+                    numba.set_num_threads(old)
+        else:
+            def run(x_start, maxiter):
+                return pcg(self.A, bs, self.M, x0=x_start, tol=self.tol, maxiter=maxiter)
+        xs, hist = run(x0, self.maxiter)
         for _ in range(2):
             nr = float(np.linalg.norm(bs - self.A @ xs))
             eta = nr / (self.anorm * float(np.linalg.norm(xs)) + nb)
             if nr / nb <= self.tol or eta <= self.tol or len(hist) - 1 >= self.maxiter:
                 break
-            xs, more = pcg(self.A, bs, self.M, x0=xs, tol=self.tol, maxiter=self.maxiter - len(hist) + 1)
+            xs, more = run(xs, self.maxiter - len(hist) + 1)
             hist += more
         rep.history = hist
         rep.iterations = len(hist) - 1

@@ -119,33 +119,73 @@ class Plate:
     name: str = ""
 
     def __post_init__(self):
-        if isinstance(self.normal, (bool, np.bool_)) or self.normal not in (1, -1):
-            raise InputError(f"Plate.normal must be +1 (yarns above) or -1 (yarns below), got {self.normal!r}")
-        self.z = check_number(self.z, "Plate.z (mm)", ge=-MAX_COORD, le=MAX_COORD)
-        if self.area is not None and self.pressure is None:
-            raise InputError("Plate.area (mm^2) goes with Plate.pressure; give force (N) alone otherwise")
-        if self.pressure is not None:
-            if self.force is not None:
-                raise InputError("Plate: give either 'force' or 'pressure' (with 'area'), not both")
-            pressure = check_number(self.pressure, "Plate.pressure (kPa)")
-            if self.area is None:
-                raise InputError("Plate.pressure needs a positive 'area' (mm^2)")
-            area = check_number(self.area, "Plate.area (mm^2)", gt=0.0)
-            self.force = pressure * area * 1e-3
-        if self.force is not None and self.displacement is not None:
-            raise InputError("Plate: give either 'displacement' (displacement control) or 'force' "
-                             "(force control), not both")
-        if self.displacement is not None:
-            self.displacement = check_number(self.displacement, "Plate.displacement (mm)", ge=-MAX_COORD,
-                                             le=MAX_COORD)
-        if self.force is not None:
-            self.force = check_number(self.force, "Plate.force (N)", ge=-1e12, le=1e12)
-        if not isinstance(self.name, str):
-            raise InputError(f"Plate.name must be a string, got {self.name!r}")
+        self._assign(_plate_state(vars(self)))
+
+    def __setattr__(self, name, value):
+        """Before ``__post_init__`` the dataclass fills the fields; after it, every assignment is
+        checked like the constructor's arguments, with the other fields (``p.force = 5`` on a
+        displacement-controlled plate, ``p.z = nan`` raise InputError). ``p.pressure`` or
+        ``p.area`` recompute the force; ``p.force`` replaces a pressure given before."""
+        if "_checked" not in self.__dict__:
+            object.__setattr__(self, name, value)
+            return
+        if name not in _PLATE_FIELDS:
+            raise InputError(f"Plate has no attribute {name!r}; its fields are {list(_PLATE_FIELDS)}")
+        state = {k: getattr(self, k) for k in _PLATE_FIELDS}
+        state[name] = value
+        if name == "force" and value is not None:
+            state["pressure"] = state["area"] = None      # a force given directly replaces the pressure
+        elif name in ("pressure", "area") and state["pressure"] is not None:
+            state["force"] = None                         # recomputed from pressure x area
+        self._assign(_plate_state(state))
+
+    def __delattr__(self, name):
+        raise InputError(f"Plate fields cannot be deleted ({name!r}); set a value (or None) instead")
+
+    def _assign(self, state: dict) -> None:
+        for k, v in state.items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "_checked", True)
 
     @property
     def force_controlled(self) -> bool:
         return self.force is not None
+
+
+_PLATE_FIELDS = ("z", "normal", "displacement", "force", "pressure", "area", "name")
+
+
+def _plate_state(d: dict) -> dict:
+    """The checked fields of a Plate from ``d`` (InputError naming the field), force derived from
+    pressure x area where a pressure is given."""
+    st = {k: d[k] for k in _PLATE_FIELDS}
+    normal = st["normal"]
+    if isinstance(normal, (bool, np.bool_)) or not isinstance(normal, (int, float, np.integer, np.floating)) \
+            or normal not in (1, -1):
+        raise InputError(f"Plate.normal must be +1 (yarns above) or -1 (yarns below), got {normal!r}")
+    st["normal"] = int(normal)
+    st["z"] = check_number(st["z"], "Plate.z (mm)", ge=-MAX_COORD, le=MAX_COORD)
+    if st["area"] is not None and st["pressure"] is None:
+        raise InputError("Plate.area (mm^2) goes with Plate.pressure; give force (N) alone otherwise")
+    if st["pressure"] is not None:
+        if st["force"] is not None:
+            raise InputError("Plate: give either 'force' or 'pressure' (with 'area'), not both")
+        st["pressure"] = check_number(st["pressure"], "Plate.pressure (kPa)")
+        if st["area"] is None:
+            raise InputError("Plate.pressure needs a positive 'area' (mm^2)")
+        st["area"] = check_number(st["area"], "Plate.area (mm^2)", gt=0.0)
+        st["force"] = st["pressure"] * st["area"] * 1e-3
+    if st["force"] is not None and st["displacement"] is not None:
+        raise InputError("Plate: give either 'displacement' (displacement control) or 'force' "
+                         "(force control), not both; set the other to None first")
+    if st["displacement"] is not None:
+        st["displacement"] = check_number(st["displacement"], "Plate.displacement (mm)", ge=-MAX_COORD,
+                                          le=MAX_COORD)
+    if st["force"] is not None:
+        st["force"] = check_number(st["force"], "Plate.force (N)", ge=-1e12, le=1e12)
+    if not isinstance(st["name"], str):
+        raise InputError(f"Plate.name must be a string, got {st['name']!r}")
+    return st
 
 
 @dataclass

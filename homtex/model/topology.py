@@ -12,7 +12,7 @@ from numba import njit
 
 from ..errors import SolverError
 
-__all__ = ["check_held", "components", "unheld_parts"]
+__all__ = ["check_held", "components", "singular_diagnosis", "unheld_parts", "weak_elements"]
 
 MOTION_NAMES = ("translation x", "translation y", "translation z",
                 "rotation about x", "rotation about y", "rotation about z")
@@ -164,3 +164,36 @@ def check_held(frame, mask, extra_edges=None, extra_images=None):
     raise SolverError(f"{len(parts)} part(s) of the structure are held by nothing "
                       f"(singular stiffness):\n" + "\n".join(lines) + more +
                       "\nAdd supports (or contacts) that hold them.")
+
+
+def weak_elements(frame, rel: float = 1e-10) -> np.ndarray:
+    """Elements whose axial (EA/L), bending (E I_min/L^3) or torsional (GJ/L) stiffness is below
+    ``rel`` x the median of the frame's: against the others they hold nothing, and the stiffness
+    matrix is singular in double precision (an E of 1e-30 MPa among yarns of 1000 MPa)."""
+    L = frame.length
+    measures = (frame.E * frame.A / L, frame.E * np.minimum(frame.Iy, frame.Iz) / L ** 3, frame.G * frame.J / L)
+    weak = np.zeros(frame.n_elements, dtype=bool)
+    for k in measures:
+        med = float(np.median(k))
+        if med > 0:
+            weak |= k < rel * med
+    return np.flatnonzero(weak)
+
+
+def singular_diagnosis(frame, mask=None) -> str:
+    """What makes the stiffness matrix of ``frame`` singular, in lines naming yarns, nodes and
+    elements: parts that the supports ``mask`` (6n,) do not hold (when given), and elements of
+    almost no stiffness (:func:`weak_elements`); "" when neither is found."""
+    lines = []
+    if mask is not None:
+        for p in unheld_parts(frame, mask)[:10]:
+            lines.append(f"  yarn(s) {p['yarns']} (nodes {_ranges(p['nodes'])}) is held by nothing: "
+                         f"{', '.join(p['free'])} free; add supports for it")
+    weak = weak_elements(frame)
+    for e in weak[:10]:
+        lines.append(f"  element {int(e)} (yarn {int(frame.yarn[e])}, nodes {frame.elements[e].tolist()}) has almost "
+                     f"no stiffness against the others (E {frame.E[e]:.3g} MPa, A {frame.A[e]:.3g} mm^2, length "
+                     f"{frame.length[e]:.3g} mm): fix its properties or remove it")
+    if len(weak) > 10:
+        lines.append(f"  ... and {len(weak) - 10} more such elements")
+    return "\n".join(lines)

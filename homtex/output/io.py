@@ -8,14 +8,22 @@ are turned into strings (JSON where possible) on a copy; the caller's Dataset is
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["file_mode", "read_netcdf", "sanitize_attrs", "write_netcdf"]
+__all__ = ["file_mode", "read_netcdf", "sanitize_attrs", "write_failure", "write_netcdf"]
+
+#: errno values of a write the file system refuses (not the disk's size): permission, read-only
+_REFUSED = {errno.EACCES: "permission denied", errno.EPERM: "permission denied",
+            errno.EROFS: "a read-only file system"}
+#: errno values of a full disk or an exhausted quota
+_FULL = {errno.ENOSPC: "the disk is full", getattr(errno, "EDQUOT", -1): "the disk quota is exhausted"}
 
 
 def file_mode() -> int:
@@ -23,6 +31,38 @@ def file_mode() -> int:
     umask = os.umask(0o022)   # read it (there is no getter) and put it back at once
     os.umask(umask)
     return 0o666 & ~umask
+
+
+def write_failure(folder, exc: BaseException) -> tuple[str, str]:
+    """Why a write into ``folder`` failed: (kind, cause) with kind ``"refused"`` (permission
+    denied, EACCES/EPERM, or a read-only file system, EROFS), ``"full"`` (ENOSPC, EDQUOT) or
+    ``"other"``; the cause in words.
+
+    The error number decides: a read-only folder on a full disk is read-only (the remedy is
+    another folder or its permissions, not freeing space), and another number (a missing
+    parent, ENOENT) is named as it is. Only an error without a system error number (None, or the
+    netCDF library's negative codes) is judged from the folder: read-only (its mount's flag),
+    not writable (``os.access``), and only then full when the disk has under 1 MB free.
+    """
+    code = getattr(exc, "errno", None)
+    if code in _REFUSED:
+        return "refused", _REFUSED[code]
+    if code in _FULL:
+        return "full", _FULL[code]
+    if code not in errno.errorcode:   # no system error number (None, netCDF's negative codes): look at the folder
+        try:
+            if os.statvfs(folder).f_flag & os.ST_RDONLY:
+                return "refused", "a read-only file system"
+            if os.path.isdir(folder) and not os.access(folder, os.W_OK):
+                return "refused", "permission denied"
+        except (OSError, AttributeError):   # AttributeError: no statvfs (Windows)
+            pass
+        try:
+            if shutil.disk_usage(folder).free < 1 << 20:
+                return "full", "the disk is full (under 1 MB free)"
+        except OSError:
+            pass
+    return "other", getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
 
 
 def _attr_value(v):

@@ -31,7 +31,8 @@ Parameter names that start with a cell table (``cell``, ``parameters``, ``yarns`
 ``resolution``) change the cell through :meth:`homtex.Cell.replace` (dotted keys); all other
 names are keyword options of the task. String options whose name ends in ``_file`` are
 input files, relative to the study file; a missing one is a StudyError when the study is
-loaded (not a failure of every point). The task is a registered name
+loaded (not a failure of every point). A study has at most :data:`MAX_POINTS` (1 000 000) points,
+checked before any is made. The task is a registered name
 (:mod:`homtex.study.tasks`), never an import path: a study file is data.
 """
 
@@ -49,6 +50,7 @@ from scipy.stats import qmc
 
 from ..cells import TABLES, load_cell
 from ..errors import StudyError
+from ..validate import read_data_file
 from .tasks import get_task
 
 try:
@@ -56,7 +58,12 @@ try:
 except ModuleNotFoundError:  # pragma: no cover - python 3.10
     import tomli as tomllib  # type: ignore
 
-__all__ = ["PARAMETER_UNITS", "Study", "base_cell", "guess_unit", "load_study", "sample_points"]
+__all__ = ["MAX_POINTS", "PARAMETER_UNITS", "Study", "base_cell", "guess_unit", "load_study", "sample_points"]
+
+#: most points a study may have (a grid's product of list lengths, or ``[sampling] n``): checked
+#: before any point is made, so a typo such as n = 1e9 or a 200^4 grid is refused at once instead
+#: of exhausting the memory (a million points are already days of compress runs)
+MAX_POINTS = 1_000_000
 
 
 @lru_cache(maxsize=4)
@@ -158,6 +165,12 @@ class Study:
                         raise StudyError(f"values must be distinct, got {v!r}", table="parameters", key=k)
                     self.grid[k] = list(v)
                 shape = [len(v) for v in self.grid.values()]
+                total = math.prod(shape)
+                if total > MAX_POINTS:
+                    raise StudyError(f"the grid has {' x '.join(map(str, shape))} = {total:.3g} points, more than "
+                                     f"the {MAX_POINTS:,} a study may have; use fewer values, or [sampling] (a Latin "
+                                     "hypercube or Sobol sample covers many parameters with few points)",
+                                     table="parameters", key=self.names[int(np.argmax(shape))])
                 idx = np.indices(shape).reshape(len(shape), -1).T
                 self.points = [{k: self.grid[k][i] for k, i in zip(self.names, row)} for row in idx]
                 self.sampling = {}
@@ -234,6 +247,9 @@ def sample_points(sampling: dict) -> tuple[list, np.ndarray]:
     n = sampling.get("n")
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise StudyError(f"must be a positive integer, got {n!r}", table="sampling", key="n")
+    if n > MAX_POINTS:
+        raise StudyError(f"must be at most {MAX_POINTS:,} points (a study's limit, checked before sampling), "
+                         f"got {n:,}", table="sampling", key="n")
     seed = sampling.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise StudyError(f"must be an integer, got {seed!r}", table="sampling", key="seed")
@@ -272,13 +288,9 @@ def load_study(path) -> Study:
     if p.is_dir():
         raise StudyError("is a folder, not a study file; give the study's .toml file", file=path)
     try:
-        data = tomllib.loads(p.read_bytes().decode("utf-8"))
+        data = tomllib.loads(read_data_file(p, error=StudyError, what="a TOML study file"))
     except FileNotFoundError:
         raise StudyError("no such file", file=path) from None
-    except OSError as exc:
-        raise StudyError(f"cannot be read: {exc.strerror or exc}", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise StudyError(f"is not UTF-8 text (a TOML study file): {exc}", file=path) from None
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(f"not valid TOML: {exc}", file=path) from None
     except RecursionError:

@@ -28,13 +28,11 @@ rerun resumes.
 
 from __future__ import annotations
 
-import errno
 import hashlib
 import json
 import logging
 import multiprocessing
 import os
-import shutil
 import socket
 import time
 import warnings
@@ -49,7 +47,7 @@ from threadpoolctl import threadpool_limits
 from .._version import __version__
 from ..errors import InputError, StudyError
 from ..model.results import Status
-from ..output.io import read_netcdf, write_netcdf
+from ..output.io import read_netcdf, write_failure, write_netcdf
 from ..output.progress import Progress
 from .combine import STATUS_FAILED, STATUS_OK, combine_points
 from .files import base_cell, load_study
@@ -96,23 +94,18 @@ def point_checksum(ds) -> str:
 
 
 # ------------------------------------------------------------------------------------ output folder
-def _disk_full(folder: Path) -> bool:
-    try:
-        return shutil.disk_usage(folder).free < 1 << 20
-    except OSError:
-        return False
-
-
 def _output_error(folder: Path, exc: BaseException) -> StudyError:
-    """One line for a write that failed in the output folder: full, not writable or else."""
-    code = getattr(exc, "errno", None)
-    reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-    if code in (errno.ENOSPC, getattr(errno, "EDQUOT", -1)) or _disk_full(folder):
+    """One line for a write that failed in the output folder: not writable (the error number says
+    permission or read-only, whatever the disk's free space), full, or else
+    (:func:`homtex.output.io.write_failure`)."""
+    kind, cause = write_failure(folder, exc)
+    reason = getattr(exc, "strerror", None) or cause
+    if kind == "refused":
+        msg = (f"the output folder {folder} is not writable ({reason}): make it writable or give "
+               "another output folder")
+    elif kind == "full":
         msg = (f"the disk holding the output folder {folder} is full ({reason}): free some space or give "
                "another output folder, then run the study again")
-    elif code in (errno.EACCES, errno.EPERM, errno.EROFS):
-        msg = (f"the output folder {folder} is not writable ({reason}): make it writable or give another "
-               "output folder")
     else:
         msg = f"cannot write to the output folder {folder} ({type(exc).__name__}: {reason})"
     return StudyError(msg)

@@ -1,0 +1,144 @@
+"""The tangent-solver interface (homtex.linalg.tangent_solver): analyse, factor, solve, report."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from homtex.errors import SolverError
+from homtex.linalg.tangent_solver import (
+    QdldlTangent,
+    SymmetricUpper,
+    TangentSolver,
+    make_tangent_solver,
+    register_tangent_solver,
+)
+
+
+def _upper(S):
+    """Upper triangle (CSC, diagonal stored, sorted) of a symmetric matrix S."""
+    U = sp.triu(sp.csc_matrix(S) + sp.eye(S.shape[0]) * 0.0, format="csc")
+    U.sort_indices()
+    return U
+
+
+def _random_sym(n, seed, shift):
+    rng = np.random.default_rng(seed)
+    M = sp.random(n, n, density=0.15, random_state=rng)
+    S = (M + M.T).toarray() + shift * np.eye(n)
+    return S
+
+
+@pytest.mark.parametrize("shift", [6.0, -0.7])
+def test_ldl_solves_and_counts_negative_eigenvalues(shift):
+    S = _random_sym(60, 1, shift)
+    U = _upper(S)
+    ts = make_tangent_solver("ldl")
+    ts.factor(U, inertia=True)
+    ev = np.linalg.eigvalsh(S)
+    assert ts.negative == int(np.sum(ev < 0))
+    assert ts.positive_definite == bool(np.all(ev > 0))
+    b = np.arange(60.0) - 30.0
+    x = ts.solve(b)
+    assert np.linalg.norm(S @ x - b) <= 1e-9 * np.linalg.norm(b)
+    rep = ts.report
+    assert (rep.factorizations, rep.solves, rep.analyses) == (1, 1, 1)
+
+
+def test_numeric_update_reuses_the_analysis():
+    S = _random_sym(40, 2, 5.0)
+    U = _upper(S)
+    ts = QdldlTangent()
+    ts.factor(U)
+    U.data *= 2.0                       # same pattern, new values, in place
+    ts.factor(U)
+    b = np.ones(40)
+    assert np.allclose(2.0 * S @ ts.solve(b), b, atol=1e-10)
+    assert ts.report.analyses == 1 and ts.report.factorizations == 2
+
+
+def test_refinement_and_pivoting_fallback_on_a_bad_indefinite_matrix():
+    # LDL^T without pivoting meets a tiny pivot: refinement and, failing that, SuperLU with pivoting
+    eps = 1e-14
+    S = np.array([[eps, 1.0, 0.0], [1.0, eps, 1.0], [0.0, 1.0, 2.0]])
+    ts = QdldlTangent()
+    ts.factor(_upper(S))
+    b = np.array([1.0, 2.0, 3.0])
+    x = ts.solve(b)
+    assert np.allclose(S @ x, b, atol=1e-10)
+    assert ts.report.refinements + ts.report.fallbacks >= 1
+
+
+def test_symmetric_view_products():
+    S = _random_sym(30, 3, 1.0)
+    U = _upper(S)
+    v = SymmetricUpper(U)
+    x = np.linspace(-1, 1, 30)
+    assert np.allclose(v.matvec(x), S @ x)
+    assert np.allclose(v.full().toarray(), S)
+
+
+def test_lu_method_and_registry():
+    rng = np.random.default_rng(4)
+    F = sp.csc_matrix(rng.normal(size=(20, 20)) + 10 * np.eye(20))
+    ts = make_tangent_solver("lu")
+    ts.factor(F)
+    b = rng.normal(size=20)
+    assert np.allclose(F @ ts.solve(b), b)
+    with pytest.raises(ValueError, match="tangent solver must be one of"):
+        make_tangent_solver("nope")
+
+    class Dense(TangentSolver):
+        name = "dense"
+
+        def _factor(self, A, inertia):
+            self.M = self.view.full().toarray()
+
+        def _solve(self, b):
+            return np.linalg.solve(self.M, b)
+
+    register_tangent_solver("dense_test", Dense)
+    try:
+        S = _random_sym(10, 5, 4.0)
+        d = make_tangent_solver("dense_test")
+        d.factor(_upper(S))
+        assert np.allclose(S @ d.solve(np.ones(10)), 1.0)
+    finally:
+        from homtex.linalg.tangent_solver import TANGENT_SOLVERS
+        TANGENT_SOLVERS.pop("dense_test")
+
+
+def test_singular_matrix_raises():
+    ts = make_tangent_solver("lu")
+    with pytest.raises(SolverError, match="singular"):
+        ts.factor(sp.csc_matrix(np.zeros((3, 3))))
+
+
+def test_free_system_routes_through_the_interface():
+    """FreeSystem's factor/solve/negative come from its tangent solver, with the answers of a direct
+    qdldl factorisation of the same matrix (bit for bit: the same calls)."""
+    import qdldl
+
+    import homtex
+    from homtex.analysis.tangent import FreeSystem
+    from homtex.fem.assembly import Assembler
+
+    nodes = np.c_[np.linspace(0, 10, 6), np.zeros(6), np.zeros(6)]
+    frame = homtex.Frame(nodes, np.c_[np.arange(5), np.arange(1, 6)], radius=0.5, E=1000.0, nu=0.3)
+    mask = np.zeros(36, dtype=bool)
+    mask[:6] = True
+    sys = FreeSystem(frame, mask)
+    K = Assembler(frame).stiffness().toarray()[np.ix_(~mask, ~mask)]
+    A = sys.A
+    cols = np.repeat(np.arange(sys.nf), np.diff(A.indptr))
+    A.data[:] = K[A.indices, cols]
+    sys.factor(inertia=True)
+    assert sys.negative == 0
+    b = np.linspace(1.0, 2.0, sys.nf)
+    x = sys.solve(b)
+    assert np.array_equal(x, qdldl.Solver(A, upper=True).solve(b))
+    assert np.allclose(K @ x, b)
+    assert sys.report.factorizations == 1 and sys.report.solves == 1
+    assert sys.refinements == 0 and sys.fallbacks == 0
+    sys.shift_diagonal(-2.0)              # diag -> -diag: indefinite, negative pivots counted
+    sys.factor(inertia=True)
+    assert sys.negative == int(np.sum(np.linalg.eigvalsh(sys.symmetric().toarray()) < 0)) > 0
