@@ -22,12 +22,12 @@ import xarray as xr
 from ..analysis.energy import LEDGER_META, ledger_check
 from ..analysis.stepping import flag_force_drops
 from ..contact.engine import EngineStepper
-from ..contact.incremental import IncrementalSolver
+from ..contact.incremental import IncrementalSolver, NonlinearSettings
 from ..errors import SolverError
 from ..model.results import Status, set_status
 from ..model.scene import Plate
 from ..output.datasets import curve_dataset
-from .sew import SewnSeam, seam_supports
+from .sew import SEW_ITERATIONS, SewnSeam, seam_supports
 
 __all__ = ["press_sewn"]
 
@@ -76,7 +76,8 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
     fixed = seam_supports(frame, info)
     for k in np.atleast_1d(info["interlock_nodes"]):
         fixed[int(k)] = [0, 1]           # the plates hold the height now
-    sol = IncrementalSolver(frame, fixed, None, plates, sewn.contact, friction_spec=sewn.friction_spec)
+    sol = IncrementalSolver(frame, fixed, None, plates, sewn.contact, friction_spec=sewn.friction_spec,
+                            settings=NonlinearSettings(max_iter=SEW_ITERATIONS))
     sol.restart_at(ut, Q)
     z_ref = z_lo + H0 + ghat            # the plate position of zero strain
 

@@ -36,7 +36,7 @@ import xarray as xr
 
 from ..cells import Cell
 from ..contact.engine import EngineStepper
-from ..contact.incremental import EngineState, IncrementalSolver
+from ..contact.incremental import EngineState, IncrementalSolver, NonlinearSettings
 from ..contact.options import Contact
 from ..contact.tension import ConstantTension
 from ..errors import InputError, SolverError
@@ -52,6 +52,12 @@ __all__ = ["STITCHES", "SewnSeam", "seam_frame", "sew"]
 log = logging.getLogger(__name__)
 
 STITCHES = ("length", "tension")
+
+#: Newton iterations per ramp step: once the pile next to the seam has buckled, the cushion
+#: settles by a snap whose pseudo-transient descent takes 100-200 iterations (the engine's default
+#: of 80 stalled d = 18 mm at level 0.5 of the ramp at every step size, with and without a seeded
+#: imperfection; 400 passes it in one to three sub-steps)
+SEW_ITERATIONS = 400
 
 #: a tension-controlled thread's own axial stiffness is scaled by this: the tension comes from
 #: the constant-force term (a leg shortened by 60 % then differs from 2 T by 1e-4 EA x 0.6, under
@@ -259,7 +265,7 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
         tension: float | None = None, contact: Contact | None = None, steps: int | None = None,
         max_cuts: int = 6, refine: float = 0.01, perturbation: float | None = None, imperfection: float = 0.0, seed=None,
         stitches: int = 1, exact: bool = False, elements_per_mm: float | None = None,
-        leg_elements: int | None = None, progress_log: bool = True) -> SewnSeam:
+        leg_elements: int | None = None, progress_log: bool = True, stop=None) -> SewnSeam:
     """Sew the seam cell of ``cell`` on the large-motion engine (see the module docstring).
 
     Parameters
@@ -277,6 +283,9 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
         (default: half the thinnest contact radius).
     imperfection, seed : standard deviation (mm) of a seeded random lateral offset of the pile's
         interior nodes (default 0: a perfect fabric).
+    stop : ``stop(row) -> bool`` called with every accepted level's path row (a dict of
+        :data:`_PATH`); True ends the ramp there (status "ok", ``ramp_done`` below 1: a calibration
+        that only needs the ramp until the cushion passes its target).
 
     Returns
     -------
@@ -312,7 +321,8 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
     frame = imperfect(frame, info, imperfection, seed)
     fixed = seam_supports(frame, info)
     spec = seam_friction(cell, frame, info) if contact.friction is None else None
-    sol = IncrementalSolver(frame, fixed, None, [], contact, friction_spec=spec, prestrain_scale=0.0)
+    sol = IncrementalSolver(frame, fixed, None, [], contact, friction_spec=spec, prestrain_scale=0.0,
+                            settings=NonlinearSettings(max_iter=SEW_ITERATIONS))
     term = None
     if stitch == "tension":
         term = stitch_tension(frame, info, T)
@@ -345,6 +355,8 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
                 log.info("sew d = %.4g mm (%s): level %.3g, cushion %.2f mm, seam line %.2f mm, legs %.3g N",
                          float(info["seam_distance"]), stitch, lam, rows[-1]["cushion_height"],
                          rows[-1]["seam_height"], rows[-1]["leg_tension"])
+            if stop is not None and stop(rows[-1]):
+                break
     u = sol.cor.u()
     n = len(rows)
     data = {k: ("step", np.array([r[k] for r in rows], dtype=float).reshape(n), *meta) for k, meta in _PATH.items()}
