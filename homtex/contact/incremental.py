@@ -46,7 +46,7 @@ from ..analysis.corotational import PARALLEL_ELEMENTS, Corotational
 from ..errors import InputError, SolverError
 from ..fem.corotational_system import apply_increment
 from ..model.frame import Frame
-from ..model.scene import Plate, Scene, parse_loads
+from ..model.scene import Scene, parse_loads
 from .ccd import pair_step_bound, plate_step_bound
 from .friction import friction_potential
 from .ipc_scene import PlateState
@@ -240,17 +240,15 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
             self.ledger["contact_energy"] = self._ev0["B"] - self.ledger["B0"]
 
     def add_term(self, term) -> None:
-        """Add a potential scaled by the pre-strain scale (e.g. a
-        :class:`~homtex.contact.tension.ConstantTension` thread) and restart the energy ledger
-        (call before the first step)."""
+        """Add a potential scaled by the pre-strain scale (a :class:`~homtex.contact.tension.ConstantTension`
+        thread) and restart the energy ledger (call before the first step)."""
         self.terms.append(term)
         with serial_numba(self.small):
             self._start_ledger()
 
     def restart_at(self, ut: np.ndarray, Q: np.ndarray) -> None:
-        """Move to the translations ``ut`` (n, 3, mm) and rotations ``Q`` (n, 3, 3) of an earlier solve of
-        the same frame and start the energy ledger there (a new path from that state; the contacts
-        are searched again)."""
+        """Move to the translations ``ut`` (n, 3, mm) and rotations ``Q`` (n, 3, 3) of an earlier solve of the
+        same frame and start the energy ledger there (a new path; the contacts are searched again)."""
         self.cor.ut[...] = ut
         self.cor.Q[...] = Q
         with serial_numba(self.small):
@@ -604,8 +602,3 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
         self.plates.z += a * d[self.n:self.n + self.P, 2]
         if self.lat is not None:
             self._set_periods(self.lat.periods + a * d[self.lat.rows, :3])
-
-def plates_for(z_bottom: float, z_top: float) -> list:
-    """Two plates: fixed bottom (yarns above) and top (yarns below), both displacement-controlled."""
-    return [Plate(z=z_bottom, normal=1, displacement=0.0, name="bottom"),
-            Plate(z=z_top, normal=-1, displacement=0.0, name="top")]

@@ -263,8 +263,8 @@ def _stitch_contacts(pairs, stencil, m0: int) -> int:
 
 def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrain: float | None = None,
         tension: float | None = None, contact: Contact | None = None, steps: int | None = None,
-        max_cuts: int = 6, refine: float = 0.01, perturbation: float | None = None, imperfection: float = 0.0, seed=None,
-        stitches: int = 1, exact: bool = False, elements_per_mm: float | None = None,
+        max_cuts: int = 6, refine: float = 0.01, perturbation: float | None = None, imperfection: float = 0.0,
+        seed=None, stitches: int = 1, exact: bool = False, elements_per_mm: float | None = None,
         leg_elements: int | None = None, progress_log: bool = True, stop=None) -> SewnSeam:
     """Sew the seam cell of ``cell`` on the large-motion engine (see the module docstring).
 
