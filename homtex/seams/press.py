@@ -92,7 +92,25 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
     legs = np.asarray(info["legs"], dtype=bool)
     rows = {k: [] for k in ("strain", *_META)}
     status, detail = Status.OK, ""
+    # until the top plate meets the specimen nothing loads it (no force, the state unchanged); a
+    # solve there would face the specimen floating between the plates (held in z by nothing)
+    free_until = max(0.0, H0 - (z_hi - z_lo)) / H0
+    legs_N = float(np.mean(sol.cor.forces[legs, 6])) if legs.any() else 0.0
+    yy = sewn.path.get("yarn_yarn_contacts")
+    sewn_pairs = float(yy.values[-1]) if yy is not None and yy.size else np.nan
     for k, lv in enumerate(np.asarray(levels, dtype=float)):
+        if lv <= free_until:
+            vals = dict.fromkeys(_META, 0.0)
+            vals.update(strain=float(lv), plate_displacement=float(lv) * H0, leg_tension=legs_N, substeps=0.0,
+                        active_yarn_yarn=sewn_pairs)
+            for key, v in vals.items():
+                rows[key].append(v)
+            continue
+        if stepper.level < free_until:
+            # the plate reaches the specimen's top without a solve (no force acts before), so no
+            # step of the path is taken with the specimen floating
+            sol.plates.z[1] = min(z_top0, z_ref - free_until * H0)
+            stepper.level = free_until
         try:
             step = stepper.advance(float(lv))
         except SolverError as err:
