@@ -3,7 +3,7 @@
     homtex run      [--out DIR] [--quick]       the main job (README's first command)
     homtex cell     CELL [--out DIR]            summary and picture of a unit cell
     homtex homogenize CELL [--solver S] [--out DIR]   effective stiffness of a periodic cell
-    homtex compress CELL [--strain 0.3] [--steps 20] [--geometry linear|nonlinear] [--friction MU] [--out DIR]
+    homtex compress CELL [--strain 0.3] [--steps 20] [--geometry nonlinear|linear] [--friction MU] [--out DIR]
     homtex seam     CELL --distance D [--prestrain EPS] [--method yarn|foundation] [--out DIR]
     homtex macro    CELL [--distance D] [--steps 50 | --curve FILE.nc] [--strain 0.5] [--scatter S] ...
     homtex study    STUDY.toml --out DIR [--scheduler ADDRESS] [--workers N] [--keep-failed] [--connect-timeout S]
@@ -92,8 +92,8 @@ def cmd_homogenize(args) -> None:
 
 def cmd_compress(args) -> None:
     if args.friction and args.geometry == "linear":
-        raise InputError(f"--friction {args.friction:g} needs --geometry nonlinear: the linear contact solve is "
-                         "frictionless")
+        raise InputError(f"--friction {args.friction:g} needs the large-motion engine (--geometry nonlinear, the "
+                         "default): the linear contact solve is frictionless")
     from .commands import compress_cell
 
     ds, paths = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
@@ -307,21 +307,24 @@ def build_parser() -> Parser:
 
     s = sub.add_parser("compress", help="compression curve of a fabric cell between plates",
                        description="Yarn-level compression of a fabric cell between rigid plates (contact "
-                       "yarn-yarn and yarn-plate): <cell file stem>_compression.nc/.png.")
+                       "yarn-yarn and yarn-plate), by default on the large-motion engine with the cell file's "
+                       "friction, as homtex.compress: <cell file stem>_compression.nc/.png "
+                       "(<cell file stem>_compression_linear.nc/.png with --geometry linear).")
     s.add_argument("cell", metavar="CELL", help=CELL_HELP)
     s.add_argument("--strain", type=fraction, default=0.3, metavar="EPS",
                    help="final compression = plate displacement / thickness, a fraction in (0, 1) (default: "
-                        "%(default)s, i.e. 30 %%, the model's validity range)")
+                        "%(default)s, i.e. 30 %%)")
     s.add_argument("--steps", type=count, default=20, metavar="N",
-                   help="load steps, integer >= 1; contact is re-linearised per step, so more steps are more "
-                        "accurate (default: %(default)s; the main job uses 50 to 50 %%)")
-    s.add_argument("--geometry", choices=("linear", "nonlinear"), default="linear",
-                   help="linear: small rotations, frictionless contact, valid to about 30 %%; nonlinear: the "
-                        "large-motion engine (co-rotational beams, barrier contact, friction), to 70 %% and beyond "
-                        "(default: %(default)s)")
+                   help="load steps, integer >= 1; the engine halves a step that fails, the linear model "
+                        "re-linearises contact per step (default: %(default)s)")
+    s.add_argument("--geometry", choices=("linear", "nonlinear"), default="nonlinear",
+                   help="nonlinear: the large-motion engine (co-rotational beams, barrier contact, the cell "
+                        "file's friction), to 70 %% and beyond, as homtex.compress by default; linear: the "
+                        "small-rotation model, frictionless, valid only to the cell's [validity] "
+                        "linear_strain_limit (a curve beyond it is flagged) (default: %(default)s)")
     s.add_argument("--friction", type=non_negative, default=None, metavar="MU",
                    help="Coulomb coefficient (dimensionless) of every yarn-yarn and yarn-plate contact, >= 0 "
-                        "(needs --geometry nonlinear; default: the cell file's [contact] table, else 0)")
+                        "(the engine; not with --geometry linear; default: the cell file's [contact] table, else 0)")
     _add_out(s, "results/compress")
     s.set_defaults(func=cmd_compress)
 
@@ -349,9 +352,9 @@ def build_parser() -> Parser:
     s.add_argument("--distance", type=positive, default=None, metavar="D",
                    help="seam distance, mm, > 0 (default: no seams)")
     s.add_argument("--steps", type=count, default=None, metavar="N",
-                   help="load steps of the unseamed compression law computed to --strain, integer >= 1 "
-                        "(default: 50, step-converged to 50 %%, as in the main job; fewer steps are faster and "
-                        "stiffer beyond 40 %%)")
+                   help="load steps of the unseamed compression law computed to --strain with the linear model, "
+                        "as in the main job, integer >= 1 (default: 50, step-converged to 50 %%; fewer steps are "
+                        "faster and stiffer beyond 40 %%; the engine's law: --curve of a `homtex compress` file)")
     s.add_argument("--curve", metavar="FILE.nc", default=None,
                    help="a stored compression law instead: the .nc file `homtex compress` writes (default: none, "
                         "computed with --steps)")

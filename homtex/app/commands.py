@@ -105,11 +105,12 @@ def homogenize_cell(path, out: Path, *, solver="amg"):
     return ds, [nc, png]
 
 
-def compress_cell(path, out: Path, *, strain=0.3, steps=20, geometry="linear", friction=None):
-    """Yarn-level compression between rigid plates: ``<stem>_compression.nc/.png``
-    (``<stem>_compression_nonlinear`` with the large-motion engine)."""
+def compress_cell(path, out: Path, *, strain=0.3, steps=20, geometry="nonlinear", friction=None):
+    """Yarn-level compression between rigid plates, by default on the large-motion engine (as
+    ``homtex.compress``): ``<stem>_compression.nc/.png`` (``<stem>_compression_linear`` with
+    ``geometry="linear"``)."""
     cell = load(path)
-    name = f"{stem_of(cell)}_compression" + ("" if geometry == "linear" else "_nonlinear")
+    name = f"{stem_of(cell)}_compression" + ("" if geometry == "nonlinear" else "_linear")
     curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True, name=name,
                                         geometry=geometry, friction=friction)
     log.info(f"modulus {summ['modulus_kPa']:.1f} kPa; stress at 10/25/40 %: {summ['stress_10_kPa']:.2f} / "
@@ -179,8 +180,10 @@ def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=
     """Macro cushion layer of a seamed specimen under the 121 cm^2 plate:
     ``<stem>_macro_<noseam|d mm>.nc/.png``. The unseamed compression law comes from ``curve``
     (a stored ``homtex compress`` netCDF file) or is computed to ``strain`` in ``steps`` steps
-    (default 50 to 50 %, step-converged as in the main job). ``strain``: final punch travel / thickness
-    (default 0.5; with a stored curve, where it ends, at most 0.5). Returns (Dataset, [paths], summary line)."""
+    (default 50 to 50 %, step-converged as in the main job) with the linear model, named, as the main
+    job does (``compress(geometry="linear")``; the engine's law: ``curve``, a ``homtex compress`` file).
+    ``strain``: final punch travel / thickness (default 0.5; with a stored curve, where it ends, at most
+    0.5). Returns (Dataset, [paths], summary line)."""
 
     cell = load(path)
     if curve is not None:
@@ -191,8 +194,8 @@ def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=
     else:
         strain = 0.5 if strain is None else strain
         with heartbeat(f"compression law of {cell.name}: {steps} steps to {100 * strain:g} %"):
-            law = compress(cell, strain=strain, steps=steps, progress=True)
-        source = f"computed, {steps} steps to {100 * strain:g} %"
+            law = compress(cell, strain=strain, steps=steps, progress=True, geometry="linear")
+        source = f"computed, {steps} steps to {100 * strain:g} % (linear model)"
     ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,
                      pre_stress=pre_stress, slack_travel=slack_travel, curve=law, strain=strain,
                      profile_options={"method": seam_method})

@@ -166,7 +166,8 @@ def linear_seam_compression(cell: Cell, *, seam_distance: float | None, strain: 
         raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
     t0 = time.perf_counter()
     if seam_distance is None:
-        ds = compress(cell, strain=strain, steps=steps, contact=Contact() if contact is None else contact)
+        ds = compress(cell, strain=strain, steps=steps, contact=Contact() if contact is None else contact,
+                      geometry="linear")
         ds = ds.assign(cushion_plate_contacts=ds.active_yarn_plate.astype(float) * np.nan)
         ds.cushion_plate_contacts.attrs.update(units="1", long_name="not counted for the unseamed cell")
         ds.attrs.update(seam_distance_mm=float("nan"), model="unseamed fabric cell (homtex.compress)",
