@@ -15,24 +15,21 @@ system is (H + M / delta) du = -g, H the symmetric part of the consistent beam t
 PSD contact and friction blocks, M a lumped diagonal of the beam tangent (frozen per step),
 delta the pseudo-time step adapted by switched evolution relaxation (delta grows with the
 residual's decrease; it shrinks when the factor shows negative pivots or the line search
-cuts). PTC changes the path to an equilibrium, not the equilibrium: the converged state has a
-zero free residual. The energy the pseudo-viscous term absorbs at fixed prescribed motions,
-sum du^T M du / delta over the corrector iterations, is recorded: small on smooth paths, large
-where the state jumps at a fixed plate position (snap-through, a buckling leg).
+cuts). PTC changes the path to an equilibrium, not the equilibrium. The energy the pseudo-viscous
+term absorbs at fixed prescribed motions (sum du^T M du / delta) is recorded: large where the
+state jumps at a fixed plate position (snap-through, a buckling leg).
 
 Every trial state is intersection-free: the step length is capped by the additive CCD of
-:mod:`.ccd` (yarn pairs, with the candidates searched again before a step can reach a pair
-outside the list) and the exact plate bound; prescribed motions (plates, supports) enter the
-first iterations as part of the Newton step (a linearised predictor cut by the CCD, never a jump
-through a yarn), then Newton corrects at the prescribed level with an Armijo line search on Pi.
+:mod:`.ccd` (candidates searched again before a step can reach a pair outside the list) and the
+exact plate bound; prescribed motions enter the first iterations as part of the Newton step (a
+predictor cut by the CCD), then Newton corrects with an Armijo line search on Pi.
 
 Friction is lagged: normal forces and tangent bases frozen at the step's start, re-lagged at
 the converged state until the nodes' normal forces settle (``friction_rounds``). The energy it
 dissipates over a step is the work of its forces along the straight path of the step.
 
-Energy bookkeeping (cumulative, per accepted state): external work (trapezoidal sum of the
-forces on prescribed DOFs, plates and loads times their motion), strain energy split, contact
-energy, friction dissipated, stabilisation absorbed, pre-strain work, and the balance.
+Energy bookkeeping (cumulative, per accepted state): external work (trapezoidal), strain energy
+split, contact energy, friction dissipated, stabilisation absorbed, pre-strain work, the balance.
 """
 
 from __future__ import annotations

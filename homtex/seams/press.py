@@ -137,6 +137,9 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
                 "stabilization_energy": L["stabilization"], "energy_balance": sol.balance()}
         for key, v in vals.items():
             rows[key].append(v)
+        log.info("seam_compression d = %.4g mm: strain %.4g, force %.4g N (%.3g kPa), %d cushion bins touched, "
+                 "%d sub-steps", float(info["seam_distance"]), float(lv), F, F / area * 1e3, vals["cushions_touched"],
+                 tot["substeps"])
     data = {k: ("strain", np.asarray(v, dtype=float), *_META[k]) for k, v in rows.items() if k != "strain"}
     ds = curve_dataset(data, {"strain": (np.asarray(rows["strain"], dtype=float), *_STRAIN)})
     x_s, h_s = sewn.profile()

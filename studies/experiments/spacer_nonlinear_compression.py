@@ -92,7 +92,7 @@ def run(out: Path, quick: bool):
         curves[mu] = ds
         seconds[mu] = ds.attrs["seconds"]
         conv[mu] = step_convergence(ds, curve(cell, refined(levels), mu)) if not quick else np.nan
-    lin = homtex.compress(cell, strain=levels)
+    lin = homtex.compress(cell, strain=levels, geometry="linear")
     small = levels[levels <= 0.01]
     stiff = curve(cell, small, 0.0, contact=homtex.Contact(barrier_stiffness=1e5, barrier_gap=1e-3))
     return cell, levels, curves, conv, seconds, lin, small, stiff
