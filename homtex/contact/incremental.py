@@ -1,10 +1,9 @@
 """Quasi-static steps of a co-rotational frame with large-motion contact and friction.
 
-:class:`IncrementalSolver` holds a state (translations, nodal rotations, plate heights, load
-factor, pre-strain scale) and takes it to the equilibrium of the next prescribed level:
-*state + scene + prescribed plate positions (or plate forces) + load factor + pre-strain scale
--> converged state, or SolverError with the state unchanged*. Each step minimises one potential
-over translations and nodal spins,
+:class:`IncrementalSolver` holds a state (translations, rotations, plate heights, load factor,
+pre-strain scale) and takes it to the equilibrium of the next prescribed level (or raises
+SolverError with the state unchanged). Each step minimises one potential over translations and
+nodal spins,
 
     Pi = U (co-rotational beams, :class:`~homtex.analysis.corotational.Corotational`)
        + B (IPC barrier, yarn-yarn and yarn-plate, :mod:`.ipc_scene`)
