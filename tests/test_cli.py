@@ -298,25 +298,26 @@ def test_written_files_follow_the_umask(tmp_path):
 
 
 def test_macro_takes_the_step_count_or_a_stored_curve_and_prints_a_summary(tmp_path, capsys, monkeypatch):
+    """`homtex macro` computes the law as macro_curve(cell) does (the engine's curve to 70 %), so the
+    command and the API give the same answer; --steps sets its plate steps."""
     import homtex.app.commands as commands
 
     calls = []
 
-    def fake_compress(cell, *, strain, steps, progress=None, geometry="nonlinear"):
-        assert geometry == "linear"                # the command's law is the linear model's, named
+    def fake_law(cell, *, strain, steps):
         calls.append((strain, steps))
         return xr.open_dataset(_linear_curve(tmp_path / f"fake{len(calls)}.nc", modulus=80.0 + steps, end=strain)
                                ).load()
 
-    monkeypatch.setattr(commands, "compress", fake_compress)
+    monkeypatch.setattr(commands, "engine_law", fake_law)
     assert main(["macro", "spacer_20mm", "--out", str(tmp_path / "a")]) == 0
     assert main(["macro", "spacer_20mm", "--steps", "7", "--strain", "0.4", "--out", str(tmp_path / "b")]) == 0
-    assert calls == [(0.5, 50), (0.4, 7)]      # default: 50 steps to 50 % (the main job's converged law)
+    assert calls == [(0.7, 35), (0.7, 7)]      # macro_curve's default law: 35 plate steps to 70 %
     out = capsys.readouterr().out
-    # no seams, stress = k eps: F_max = 12100 mm^2 x k x 0.5 / 1000 = 6.05 k N (k = 130 kPa for 50 steps)
-    assert "max force 786.5 N at 10.00 mm (50 %)" in out
-    assert "force at 30 % (6.0 mm) 471.9 N" in out and "first contact at" in out
-    assert "computed, 7 steps to 40 % (linear model)" in out
+    # no seams, stress = k eps: F_max = 12100 mm^2 x k x 0.5 / 1000 = 6.05 k N (k = 115 kPa for 35 steps)
+    assert "max force 695.8 N at 10.00 mm (50 %)" in out
+    assert "force at 30 % (6.0 mm) 417.4 N" in out and "first contact at" in out
+    assert "the large-motion engine to 70 % in 7 plate steps" in out
     with xr.open_dataset(tmp_path / "b" / "spacer_20mm_macro_noseam.nc") as ds:
         assert ds.force.values[-1] == pytest.approx(12.1 * 87.0 * 0.4)
     # a stored curve instead of computing one

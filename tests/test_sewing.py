@@ -205,3 +205,18 @@ def test_pressing_a_sewn_cell_from_the_unseamed_thickness(sewn, cell):
     np.testing.assert_allclose(ds.plate_displacement.values, np.array(levels) * H0)
     assert ds.attrs["status"] == "ok" or "energy balance" in ds.attrs["status_detail"]
     assert ds.attrs["sewn_thickness_mm"] == pytest.approx(H0 * (1 - first))
+
+
+def test_the_cache_command_lists_and_clears(tmp_path, monkeypatch, capsys, cell):
+    import xarray as xr
+
+    from homtex.app.cli import main
+
+    monkeypatch.setenv("HOMTEX_CACHE_DIR", str(tmp_path / "c"))
+    cache.clear_cache()
+    cache.cached("law", cell, {"p": 1}, lambda: xr.Dataset({"a": ("i", np.zeros(2), {"units": "1",
+                                                                                   "long_name": "a"})}))
+    assert main(["cache"]) == 0
+    assert "1 cached result(s)" in capsys.readouterr().out
+    assert main(["cache", "--clear"]) == 0
+    assert "removed 1 cached result(s)" in capsys.readouterr().out and cache.list_cache() == []
