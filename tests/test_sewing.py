@@ -220,3 +220,21 @@ def test_the_cache_command_lists_and_clears(tmp_path, monkeypatch, capsys, cell)
     assert "1 cached result(s)" in capsys.readouterr().out
     assert main(["cache", "--clear"]) == 0
     assert "removed 1 cached result(s)" in capsys.readouterr().out and cache.list_cache() == []
+
+
+def test_calibrate_stitch_finds_the_prestrain_of_a_target_cushion(sewn, cell):
+    """A target between the cushions of eps0 = 0.2 and 0.3 (frictionless, so the ramp is path
+    independent) is met by an eps0 between them, checked by a sewing of its own."""
+    from homtex.seams.calibrate import calibrate_stitch
+
+    p = sewn[0.3].path
+    h2, h3 = float(p.cushion_height[1]), float(p.cushion_height[2])
+    assert h3 < h2 - 0.5                                 # the cushion falls over the bracket
+    target = 0.5 * (h2 + h3)
+    r = calibrate_stitch(cell, seam_distance=D_SMALL, cushion_height=target, eps_max=0.3, steps=3, max_checks=2,
+                         contact=homtex.Contact(friction=0.0))
+    assert 0.2 < r["prestrain"] < 0.3
+    assert abs(r["cushion_height"] - target) <= 0.005 * target
+    with pytest.raises(InputError, match="raise eps_max"):
+        calibrate_stitch(cell, seam_distance=D_SMALL, cushion_height=5.0, eps_max=0.05, steps=1,
+                         contact=homtex.Contact(friction=0.0))
