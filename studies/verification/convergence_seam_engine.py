@@ -139,14 +139,19 @@ def chart(out):
                                     xytext=(4, 4), fontsize=7)
                 ax.set_xticks(np.arange(sel.sizes["case"]))
                 ax.set_xticklabels([str(v) for v in sel.label.values], fontsize=7)
-            ax.set(ylabel="cushion height, mm", title=f"{p} convergence (annotated: change with each refinement)")
+            ax.set(ylabel="cushion height, mm")
+            ax.set_title(f"{'ramp levels' if p == 'steps' else 'mesh'}: change with each refinement", fontsize=9)
         else:
-            ax.barh(np.arange(ds.sizes["case"]), ds.cushion_height.values, color="tab:gray")
+            h = ds.cushion_height.values
+            ax.barh(np.arange(ds.sizes["case"]), h, color="tab:gray", label="cushion height")
+            for i, v in enumerate(h):
+                ax.text(v, i, f" {v:.2f}", va="center", fontsize=7)
             ax.set_yticks(np.arange(ds.sizes["case"]))
             ax.set_yticklabels([str(v) for v in ds.label.values], fontsize=7)
-            ax.set(xlabel="cushion height, mm", title="d = 24 mm: sensitivity (cell file: friction 0.2, "
-                                                      "calibrated eps0 = x1.00)")
-            ax.tick_params(axis="x")
+            ax.set_xlim(0.8 * np.nanmin(h), 1.08 * np.nanmax(h))
+            ax.set_xlabel("cushion height, mm")
+            ax.set_title(f"d = {float(ds.effective_seam_distance[0]):.1f} mm: sensitivity (shipped: friction 0.2, "
+                         "eps0 x1.00)", fontsize=9)
         ax.legend(fontsize=7) if p != "sensitivity" else None
     fig.suptitle("yarn-level seam on the large-motion engine: cushion height under refinement and changed inputs",
                  fontsize=9)
