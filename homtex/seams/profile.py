@@ -156,6 +156,7 @@ def engine_profile(cell: Cell, *, seam_distance: float, prestrain: float | None 
     """Cushion profile of the yarn-level seam cell sewn on the engine (``seam_profile(method="yarn")``);
     ``options`` go to :func:`sewn_seam` (stitch, contact, steps, perturbation, imperfection, seed,
     cache, stitches, exact, elements_per_mm, leg_elements)."""
+    seam_distance = check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
     use_cache = bool(options.get("cache", True))
 
     def compute():
