@@ -92,10 +92,15 @@ def test_sewing_is_path_independent_without_friction(sewn):
     assert float(a.path.cushion_height[-1]) == pytest.approx(float(b.path.cushion_height[1]), abs=2e-3)
 
 
-def test_a_sewn_state_survives_the_disk_cache(sewn, cell):
+def test_a_sewn_state_survives_the_disk_cache(sewn, cell, tmp_path):
+    from homtex.output.io import read_netcdf, write_netcdf
+    from homtex.seams.profile import profile_dataset
+
     s = sewn[0.3]
-    ds = s.to_dataset()
+    ds = read_netcdf(write_netcdf(s.to_dataset(), tmp_path / "sewn.nc"))
     back = SewnSeam.from_dataset(cell, ds, contact=s.contact)
+    p0, p1 = profile_dataset(s), profile_dataset(back)
+    np.testing.assert_array_equal(p1.height.values, p0.height.values)
     np.testing.assert_array_equal(back.u, s.u)
     np.testing.assert_array_equal(back.profile()[1], s.profile()[1])
     assert back.prestrain == 0.3 and back.stitch == "length"

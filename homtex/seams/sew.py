@@ -213,6 +213,7 @@ class SewnSeam:
                             plate_force=np.zeros(0), touch=None, ledger={})
         path = ds.drop_vars([v for v in ("ut", "Q", "node", "xyz", "i", "j") if v in ds.variables])
         attrs = {k: v for k, v in ds.attrs.items()}
+        attrs["branch_switches"] = _events(attrs.get("branch_switches", []))
         return cls(frame=frame, info=info, state=state, u=np.hstack([ut, rot]), path=path, stitch=stitch,
                    prestrain=eps0, tension=float(ds.attrs["tension_N"]), contact=contact, friction_spec=spec,
                    status=str(ds.attrs.get("sewn_status", "ok")), detail=str(ds.attrs.get("sewn_detail", "")),
@@ -243,6 +244,13 @@ class SewnSeam:
         pre = np.asarray(f.prestrain, dtype=float).copy()
         pre[term.elements] = term.force / f.EA[term.elements] - eps[term.elements]
         return f.replace(prestrain=np.clip(pre, -0.999, 0.999))
+
+
+def _events(v) -> np.ndarray:
+    """Branch-switch records as a flat float array (a netCDF file gives an empty one back as '[]')."""
+    if isinstance(v, str):
+        v = [float(t) for t in v.strip().strip("[]").replace(",", " ").split()]
+    return np.asarray(v, dtype=float).reshape(-1)
 
 
 def stitch_tension(frame, info, tension: float) -> ConstantTension:
