@@ -177,6 +177,28 @@ def column_heights(H0: float, *, seam_distance=None, profile=None, height_scatte
     return x, np.clip(h, 1e-9, H0), cushion - cushion.min()
 
 
+def _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options, profile_options):
+    """(curve, profile, seconds spent computing them) of macro_curve: what was not injected comes
+    from the cell (the engine's law and the sewn profile, both cached)."""
+    t_sub = 0.0
+    if curve is None:
+        if cell is None:
+            raise InputError("macro_curve: give a cell or a compression curve")
+        ts = time.perf_counter()
+        if compress_options:
+            curve = compress(cell, strain=strain, **compress_options)
+        else:
+            curve = engine_law(cell, strain=max(float(strain), LAW_STRAIN))
+        t_sub += time.perf_counter() - ts
+    if seam_distance is not None and profile is None:
+        if cell is None:
+            raise InputError("macro_curve: seam_distance needs a cell or a profile")
+        ts = time.perf_counter()
+        profile = seam_profile(cell, seam_distance=seam_distance, **(profile_options or {}))
+        t_sub += time.perf_counter() - ts
+    return curve, profile, t_sub
+
+
 def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, plate_area: float = 12100.0,
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
                 steps: int = 201, thickness: float | None = None, pre_stress: str = "thread",
@@ -235,24 +257,8 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     for name, opts in (("compress_options", compress_options), ("profile_options", profile_options)):
         if opts is not None and not isinstance(opts, dict):
             raise InputError(f"{name} must be a dict of keyword arguments, got {type(opts).__name__}")
-    t_sub = 0.0
-    if curve is None:
-        if cell is None:
-            raise InputError("macro_curve: give a cell or a compression curve")
-
-        ts = time.perf_counter()
-        if compress_options:
-            curve = compress(cell, strain=strain, **compress_options)
-        else:
-            curve = engine_law(cell, strain=max(float(strain), LAW_STRAIN))
-        t_sub += time.perf_counter() - ts
-    if seam_distance is not None and profile is None:
-        if cell is None:
-            raise InputError("macro_curve: seam_distance needs a cell or a profile")
-
-        ts = time.perf_counter()
-        profile = seam_profile(cell, seam_distance=seam_distance, **(profile_options or {}))
-        t_sub += time.perf_counter() - ts
+    curve, profile, t_sub = _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options,
+                                         profile_options)
     H0 = _thickness(cell, curve, thickness)
     law, eps_max = unseamed_law(curve)
     status, detail = Status.OK, ""

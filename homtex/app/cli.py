@@ -423,7 +423,7 @@ def build_parser() -> Parser:
                        description="The result cache keeps cell computations (sewn seam cells, their profiles, "
                        "the unseamed law of macro_curve) in $HOMTEX_CACHE_DIR (default ~/.cache/homtex), keyed "
                        "by the cell's content, the parameters and the homtex version.")
-    s.add_argument("--clear", action="store_true", help="remove every cached result")
+    s.add_argument("--clear", action="store_true", help="remove every cached result (default: list them)")
     s.set_defaults(func=cmd_cache)
     for name, sp in sub.choices.items():   # --debug also after the command (homtex seam ... --debug)
         sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
