@@ -41,6 +41,7 @@ _LAZY = {
     "Lattice": ".contact.lattice",
     "RestState": ".model.rest",
     "YarnCompression": ".model.compression",
+    "clear_cache": ".cache",
 }
 
 __all__ = ["CellError", "InputError", "SolverError", "StrainWarning", "StudyError",

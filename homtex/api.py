@@ -1,7 +1,8 @@
 """The public entry points that dispatch to a stage: ``solve_static`` (with or without contact),
 ``solve_nonlinear`` (large rotations; with contact the large-motion engine) and ``compress``
-(linear or co-rotational beams). They check their arguments, read the defaults of
-:mod:`homtex.config` and hand over; the work is done in the stage's room."""
+(the large-motion engine by default; the linear small-rotation model by name). They check their
+arguments, read the defaults of :mod:`homtex.config` and hand over; the work is done in the
+stage's room."""
 
 from __future__ import annotations
 
@@ -106,6 +107,19 @@ def _frame_of(obj):
     return fr, groups, info, spec
 
 
+def _refuse_linear_options(*, solver, tol, contact: Contact) -> None:
+    """InputError for an option of the linear model given to the engine (``compress``'s default),
+    which would otherwise ignore it: say to name ``geometry="linear"`` or leave the option out."""
+    given = [f"{name}={value!r}" for name, value in (("solver", solver), ("tol", tol)) if value is not None]
+    given += [f"Contact({name}={value!r})" for name, value in contact.linear_only().items()]
+    if given:
+        raise InputError(f"compress: {', '.join(given)} {'is an option' if len(given) == 1 else 'are options'} of "
+                         "the linear model, which compress runs only when named: add geometry=\"linear\" for it "
+                         "(small rotations, frictionless; valid to the cell's [validity] linear_strain_limit), or "
+                         "leave the option out for the large-motion engine (geometry=\"nonlinear\", the default), "
+                         "which has its own solver and tolerances")
+
+
 def _targets(v, steps, name):
     arr = np.atleast_1d(as_real(v, name))
     if arr.ndim != 1 or arr.size > 100_000:
@@ -125,22 +139,29 @@ def _targets(v, steps, name):
 def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "displacement",
              contact: Contact | None = None, pressure=None, fixed=None, thickness: float | None = None,
              area: float | None = None, solver: str | None = None, tol: float | None = None,
-             maxiter: int | None = None, max_cuts: int = 4, progress: bool | None = None, geometry: str = "linear",
+             maxiter: int | None = None, max_cuts: int = 4, progress: bool | None = None, geometry: str = "nonlinear",
              stabilize: float = 0.0) -> xr.Dataset:
-    """Compression curve of a cell between two rigid plates.
+    """Compression curve of a cell between two rigid plates: by default on the large-motion engine
+    (``geometry="nonlinear"``, with the cell file's ``[contact]`` friction); the linear
+    small-rotation model only when named (``geometry="linear"``).
 
     Parameters
     ----------
     cell_or_frame : homtex.Frame, or an object with ``.frame`` (a homtex Cell; its ``.groups``
         {name: (m,) bool element mask} give per-group energies, ``.info["thickness"]`` the
-        plate distance).
+        plate distance, its ``[contact]`` table the friction of the engine).
     strain : final compression strain (plate displacement / initial plate distance, > 0), or
         an increasing array of strains (displacement control).
     steps : number of equal steps up to ``strain`` (or ``pressure``).
     control : "displacement" (the top plate moves) or "force" (uniform ``pressure`` on it).
     pressure : final pressure (kPa) or an increasing array (force control).
-    contact : Contact options (default ``Contact()``: pdas, augmented Lagrangian; with
-        ``geometry="nonlinear"`` the barrier and friction options: ``Contact(friction=0.3)``).
+    contact : Contact options. Engine (default): the barrier, friction and search options
+        (``friction``, ``plate_friction``, ``barrier_gap``, ``barrier_stiffness``, ``friction_slip``,
+        ``compression``, ``margin``), e.g. ``Contact(friction=0.3)``; default ``Contact()``, the
+        friction of the cell file's ``[contact]`` table (else 0). ``geometry="linear"``: the
+        active-set and enforcement options (``strategy``, ``enforcement``, ``penalty``, ``gap_tol``,
+        ...; default pdas, augmented Lagrangian); frictionless, solid yarns only. An option of the
+        other model set away from its default is refused (InputError), not ignored.
     fixed : extra supports (dict as in ``solve_static``); default pins the in-plane rigid
         motions that frictionless plates leave free (ux, uy of the lowest node for a 2-periodic
         frame; plus one in-plane DOF against rotation about z for a finite frame).
@@ -148,21 +169,28 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
         (z_max + r) - (z_min - r)); the bottom plate touches the lowest yarn surface.
     area : nominal area for the stress, mm^2 (default |p1 x p2| of a 2-periodic frame in x-y,
         else the x-y bounding box of the yarns).
-    solver, tol : linear solver and tolerance (default: options ``compress_solver`` ("direct")
-        and ``tol``).
-    maxiter : iteration limit, an integer >= 1: with ``geometry="linear"`` of the iterative linear
-        solves (``solver="amg"`` or ``"cg"``; default 1000 and 5000); with ``geometry="nonlinear"``
-        the large-motion engine's Newton iterations per friction round of a step (default 80;
-        :class:`homtex.contact.incremental.NonlinearSettings` ``max_iter``).
-    max_cuts : a step whose contact iteration fails (cycling active set, penetration, solver
-        failure) is retried as two half steps, recursively up to ``max_cuts`` times (down to
-        1/2**max_cuts of the step); only then the curve ends. 0 disables the retries.
+    solver, tol : linear solver and tolerance of the linear model (``geometry="linear"`` only;
+        default: options ``compress_solver`` ("direct") and ``tol``). The engine has its own
+        factorisation and equilibrium tolerance: passing either without ``geometry="linear"`` is
+        an InputError that says so.
+    maxiter : iteration limit, an integer >= 1: with ``geometry="nonlinear"`` the large-motion
+        engine's Newton iterations per friction round of a step (default 80;
+        :class:`homtex.contact.incremental.NonlinearSettings` ``max_iter``); with
+        ``geometry="linear"`` of the iterative linear solves (``solver="amg"`` or ``"cg"``; default
+        1000 and 5000).
+    max_cuts : a step that fails (linear: cycling active set, penetration, solver failure; engine:
+        no convergence, or a step whose stabilisation takes more than 1 % of its work) is retried
+        as two half steps, recursively up to ``max_cuts`` times (down to 1/2**max_cuts of the
+        step); only then the curve ends. 0 disables the retries.
     progress : show a progress bar (default: option ``progress``).
-    geometry : "linear" (small rotations, frictionless; contact re-linearised per step) or
-        "nonlinear" (the large-motion engine, :mod:`homtex.contact.nl_compress`: co-rotational
-        beams, IPC barrier contact that no yarn passes through, lagged Coulomb friction from
-        ``contact.friction`` or the cell file's ``[contact]`` table, pseudo-transient
-        continuation through buckling; yarns may rotate, buckle and slide).
+    geometry : "nonlinear" (default: the large-motion engine, :mod:`homtex.contact.nl_compress`:
+        co-rotational beams, IPC barrier contact that no yarn passes through, lagged Coulomb
+        friction from ``contact.friction`` or the cell file's ``[contact]`` table, pseudo-transient
+        continuation through buckling; yarns may rotate, buckle and slide) or "linear" (the
+        small-rotation model, kept by name: linear beams, frictionless contact re-linearised per
+        step; fast, and valid only for small motions: a curve that goes beyond the cell file's
+        ``[validity] linear_strain_limit`` (where its stress leaves 10 % of the engine's; 0.18 %
+        on spacer_20mm), or whose nodes turn by more than 0.1 rad, is "flagged").
     stabilize : must be 0 (the viscous stabilisation of the former co-rotational contact solve;
         the large-motion engine stabilises itself and records what that absorbs).
 
@@ -173,10 +201,11 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     (mm), contact iterations, linear solves, energies (N mm) and, with groups, ``group_energy``;
     with ``geometry="nonlinear"`` also ``external_work``, ``strain_energy``, ``contact_energy``,
     ``friction_energy``, ``stabilization_energy`` (N mm), ``energy_balance``, ``min_gap``,
-    ``pile_force`` and ``attrs["first_buckling_strain"]``.
+    ``pile_force`` and ``attrs["first_buckling_strain"]``; ``attrs["geometry"]`` names the model.
     A failing step ends the curve: the steps before it are kept, ``attrs["status"]`` is
     "failed" and ``attrs["status_detail"]`` says why ("ok" otherwise; "flagged" for a complete
-    nonlinear curve whose stabilisation or energy balance exceeds 1 % of the external work).
+    nonlinear curve whose stabilisation or energy balance exceeds 1 % of the external work, or a
+    linear curve beyond the linear model's validity).
     """
     frame, groups, info, spec = _frame_of(cell_or_frame)
     check_choice(control, "control", ("displacement", "force"))
@@ -193,8 +222,10 @@ def compress(cell_or_frame, *, strain=None, steps: int = 20, control: str = "dis
     friction_spec = None
     if geometry == "linear":
         contact.require_frictionless("compress(geometry='linear')")
-    elif callable(spec) and contact.friction is None:
-        friction_spec = spec()
+    else:
+        _refuse_linear_options(solver=solver, tol=tol, contact=contact)
+        if callable(spec) and contact.friction is None:
+            friction_spec = spec()
     max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=30)
     if maxiter is not None:
         maxiter = check_int(maxiter, "maxiter", ge=1, le=10 ** 6)

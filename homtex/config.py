@@ -14,8 +14,8 @@ name                         default      meaning
 ============================ ============ ==========================================================
 ``static_solver``            ``"amg"``    ``solve_static`` (also with contact): "amg", "direct", "cg"
 ``homogenize_solver``        ``"amg"``    ``homogenize``, ``solve_macro``, ``compression_modulus``
-``compress_solver``          ``"direct"`` ``compress``, seam cells (``seam_profile``, ``seam_compression``);
-                                          small, often ill-conditioned contact systems
+``compress_solver``          ``"direct"`` ``compress(geometry="linear")``, linear seam cells; small, often
+                                          ill-conditioned contact systems
 ``nonlinear_solver``         ``"auto"``   ``solve_nonlinear``: "auto" (LU where moments act on free rotations,
                                           else LDL^T), "ldl", "lu" ("direct" = "ldl")
 ``amg_setup``                ``"fast"``   AMG hierarchy setup: "fast" (Lanczos spectral bounds on the numba

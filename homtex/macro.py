@@ -42,6 +42,13 @@ pre-compressed column as fresh fabric, with straight pile yarns it no longer has
 
 Total force F(w) = sum_i a_i sigma_i(w) (a_i = plate_area / n_columns), stress = F / plate_area.
 Strain in the output is w / H0 (the paper's curves start from a 20 mm plate distance).
+
+Inputs by default (a cell given, nothing injected): the unseamed law is the large-motion engine's
+curve of the cell to 70 % (:func:`engine_law`: ``compress(geometry="nonlinear")`` with the cell
+file's friction, 35 plate steps), the cushions come from ``seam_profile`` (the cell file's seam
+method, the calibrated stitch). Both are cell computations kept in the result cache
+(:mod:`homtex.cache`: memory and disk, keyed by cell content, parameters and package version), so
+a repeated call costs milliseconds.
 """
 
 from __future__ import annotations
@@ -53,15 +60,36 @@ import numpy as np
 import xarray as xr
 
 from .api import compress
+from .cache import cached
 from .errors import InputError
 from .lookup import Lookup
 from .model.results import Status, set_status
 from .seams import seam_profile
 from .validate import check_choice, check_int, check_number, check_seed
 
-__all__ = ["macro_curve", "column_heights", "unseamed_law"]
+__all__ = ["LAW_STEPS", "LAW_STRAIN", "column_heights", "engine_law", "macro_curve", "unseamed_law"]
 
 PRE_STRESS = ("thread", "held", "released")
+
+#: the default unseamed law: the engine's curve to this strain in this many plate steps
+LAW_STRAIN = 0.7
+LAW_STEPS = 35
+
+
+def engine_law(cell, *, strain: float = LAW_STRAIN, steps: int = LAW_STEPS, contact=None, cache: bool = True):
+    """The unseamed compression law of ``cell`` on the large-motion engine (``compress(cell,
+    geometry="nonlinear")`` on :func:`homtex.seams.compress.strain_levels`, the cell file's friction
+    unless ``contact`` says otherwise), from the result cache when computed before."""
+    from .seams.compress import strain_levels
+
+    levels = strain_levels(strain, steps)
+
+    def compute():
+        return compress(cell, strain=levels, geometry="nonlinear", contact=contact)
+
+    if not cache:
+        return compute()
+    return cached("law", cell, {"levels": levels, "contact": contact}, compute)
 
 
 def _thickness(cell, curve, thickness):
@@ -149,6 +177,28 @@ def column_heights(H0: float, *, seam_distance=None, profile=None, height_scatte
     return x, np.clip(h, 1e-9, H0), cushion - cushion.min()
 
 
+def _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options, profile_options):
+    """(curve, profile, seconds spent computing them) of macro_curve: what was not injected comes
+    from the cell (the engine's law and the sewn profile, both cached)."""
+    t_sub = 0.0
+    if curve is None:
+        if cell is None:
+            raise InputError("macro_curve: give a cell or a compression curve")
+        ts = time.perf_counter()
+        if compress_options:
+            curve = compress(cell, strain=strain, **compress_options)
+        else:
+            curve = engine_law(cell, strain=max(float(strain), LAW_STRAIN))
+        t_sub += time.perf_counter() - ts
+    if seam_distance is not None and profile is None:
+        if cell is None:
+            raise InputError("macro_curve: seam_distance needs a cell or a profile")
+        ts = time.perf_counter()
+        profile = seam_profile(cell, seam_distance=seam_distance, **(profile_options or {}))
+        t_sub += time.perf_counter() - ts
+    return curve, profile, t_sub
+
+
 def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, plate_area: float = 12100.0,
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
                 steps: int = 201, thickness: float | None = None, pre_stress: str = "thread",
@@ -159,8 +209,10 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     Parameters
     ----------
     cell : the unseamed spacer cell (homtex Cell). Used for what is not injected: the
-        compression law (``homtex.compress(cell, strain=strain, **compress_options)``), the
-        seam profile (``homtex.seam_profile(cell, seam_distance=d)``) and H0 (``info["thickness"]``).
+        compression law (:func:`engine_law`, the engine's curve to 70 %, cached; with
+        ``compress_options``: ``homtex.compress(cell, strain=strain, **compress_options)``), the
+        seam profile (``homtex.seam_profile(cell, seam_distance=d, **profile_options)``, cached)
+        and H0 (``info["thickness"]``).
     seam_distance : d, mm (None: no seams, all columns H0).
     height_scatter : standard deviation of the cushion-to-cushion height, mm (seeded by ``seed``).
     plate_area : punch area, mm^2 (121 cm^2 = 12100 mm^2, DIN EN ISO 3386-1).
@@ -205,21 +257,8 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     for name, opts in (("compress_options", compress_options), ("profile_options", profile_options)):
         if opts is not None and not isinstance(opts, dict):
             raise InputError(f"{name} must be a dict of keyword arguments, got {type(opts).__name__}")
-    t_sub = 0.0
-    if curve is None:
-        if cell is None:
-            raise InputError("macro_curve: give a cell or a compression curve")
-
-        ts = time.perf_counter()
-        curve = compress(cell, strain=strain, **(compress_options or {}))
-        t_sub += time.perf_counter() - ts
-    if seam_distance is not None and profile is None:
-        if cell is None:
-            raise InputError("macro_curve: seam_distance needs a cell or a profile")
-
-        ts = time.perf_counter()
-        profile = seam_profile(cell, seam_distance=seam_distance, **(profile_options or {}))
-        t_sub += time.perf_counter() - ts
+    curve, profile, t_sub = _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options,
+                                         profile_options)
     H0 = _thickness(cell, curve, thickness)
     law, eps_max = unseamed_law(curve)
     status, detail = Status.OK, ""

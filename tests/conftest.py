@@ -4,6 +4,21 @@ import pytest
 import homtex
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _private_result_cache(tmp_path_factory):
+    """The result cache (homtex.cache) of the test session lives in a folder of its own: tests
+    neither read a user's cached results nor leave theirs behind."""
+    import os
+
+    old = os.environ.get("HOMTEX_CACHE_DIR")
+    os.environ["HOMTEX_CACHE_DIR"] = str(tmp_path_factory.mktemp("homtex_cache"))
+    yield
+    if old is None:
+        os.environ.pop("HOMTEX_CACHE_DIR", None)
+    else:
+        os.environ["HOMTEX_CACHE_DIR"] = old
+
+
 def line_frame(n_el, L=100.0, direction=(1.0, 0.0, 0.0), **kw):
     """A straight beam of n_el elements from the origin along ``direction``."""
     d = np.asarray(direction, float)

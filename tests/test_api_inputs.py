@@ -34,7 +34,8 @@ def _cases():
                                                                 "maxiter"]),
         "periodize": (lambda **k: homtex.periodize(fr, **({"box": np.array([[0, -1, -1], [10, 1, 1.]]),
                                                            "axes": [0]} | k)), ["box", "axes", "tol"]),
-        "compress": (lambda **k: homtex.compress(spacer, **({"strain": 0.01, "steps": 1} | k)),
+        # the default model (the engine); a strain of 1e-4 keeps each accepted call short
+        "compress": (lambda **k: homtex.compress(spacer, **({"strain": 1e-4, "steps": 1} | k)),
                      ["strain", "steps", "control", "contact", "pressure", "fixed", "thickness", "area", "solver",
                       "tol", "maxiter", "max_cuts", "progress", "geometry", "stabilize"]),
         "seam_profile": (lambda **k: homtex.seam_profile(spacer, **({"seam_distance": 24.0,
@@ -145,6 +146,40 @@ def test_nonlinear_compress_checks_and_uses_maxiter():
         warnings.simplefilter("ignore")
         ds = homtex.compress(spacer, strain=0.05, steps=1, geometry="nonlinear", maxiter=2, max_cuts=0)
     assert ds.attrs["status"] == "failed" and "did not converge in 2 iterations" in ds.attrs["status_detail"]
+
+
+@pytest.mark.parametrize("kw", [{"solver": "amg"}, {"tol": 1e-8}, {"contact": homtex.Contact(strategy="removal")},
+                                {"contact": homtex.Contact(enforcement="penalty", penalty=10.0, friction=0.2)},
+                                {"contact": homtex.Contact(gap_tol=1e-6)}])
+def test_linear_options_without_naming_the_linear_model_are_refused(kw):
+    """compress runs the large-motion engine unless geometry="linear" is named; an option that only
+    the linear model has (its linear solver and tolerance, the active-set and enforcement options of
+    Contact) is refused with the remedy, never ignored; named, the linear model takes it."""
+    spacer = homtex.load_cell("spacer_20mm")
+    for geometry in ({}, {"geometry": "nonlinear"}):
+        with pytest.raises(homtex.InputError, match=r"of the linear model.*add geometry=\"linear\"") as err:
+            homtex.compress(spacer, strain=1e-4, steps=1, **kw, **geometry)
+        what = next(iter(kw)) if "contact" not in kw else next(iter(kw["contact"].linear_only()))
+        assert what in str(err.value)
+    if "contact" in kw and kw["contact"].has_friction:
+        kw = {"contact": homtex.Contact(enforcement="penalty", penalty=10.0)}   # the linear model is frictionless
+    ds = homtex.compress(spacer, strain=1e-4, steps=1, geometry="linear", **kw)
+    assert ds.attrs["geometry"] == "linear"
+    if "contact" in kw:
+        assert (ds.attrs["strategy"], ds.attrs["enforcement"]) == (kw["contact"].strategy, kw["contact"].enforcement)
+
+
+def test_the_default_model_is_the_engine_with_the_cell_files_friction():
+    """compress(cell) is compress(cell, geometry="nonlinear"): the large-motion engine with the
+    friction of the cell file's [contact] table; the engine's options (margin, barrier, friction)
+    are taken."""
+    spacer = homtex.load_cell("spacer_20mm")
+    ds = homtex.compress(spacer, strain=1e-3, steps=1)
+    named = homtex.compress(spacer, strain=1e-3, steps=1, geometry="nonlinear")
+    assert ds.attrs["geometry"] == "nonlinear" and ds.attrs["friction_max"] == pytest.approx(0.2)
+    np.testing.assert_array_equal(ds.stress.values, named.stress.values)
+    ds = homtex.compress(spacer, strain=1e-4, steps=1, contact=homtex.Contact(margin=0.5, barrier_gap=0.02))
+    assert ds.attrs["geometry"] == "nonlinear" and ds.sizes["strain"] == 1
 
 
 @pytest.mark.parametrize("kw", [{"strain": []}, {"strain": np.array([])}, {"control": "force", "pressure": []}])

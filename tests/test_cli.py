@@ -126,6 +126,7 @@ def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_pat
     with xr.open_dataset(stored) as ds:
         api = homtex.compress(homtex.load_cell(spacer), strain=0.1, steps=5)
         np.testing.assert_allclose(ds.stress.values, api.stress.values, rtol=1e-8)
+        assert ds.attrs["geometry"] == api.attrs["geometry"] == "nonlinear"   # one default: the engine
         s, e = ds.stress.values, ds.strain.values
     assert (tmp_path / "c" / "spacer_20mm_compression.png").exists()
     # the macro layer on that stored law, no seams: every column under the 121 cm^2 plate is engaged
@@ -297,24 +298,26 @@ def test_written_files_follow_the_umask(tmp_path):
 
 
 def test_macro_takes_the_step_count_or_a_stored_curve_and_prints_a_summary(tmp_path, capsys, monkeypatch):
+    """`homtex macro` computes the law as macro_curve(cell) does (the engine's curve to 70 %), so the
+    command and the API give the same answer; --steps sets its plate steps."""
     import homtex.app.commands as commands
 
     calls = []
 
-    def fake_compress(cell, *, strain, steps, progress=None):
+    def fake_law(cell, *, strain, steps):
         calls.append((strain, steps))
         return xr.open_dataset(_linear_curve(tmp_path / f"fake{len(calls)}.nc", modulus=80.0 + steps, end=strain)
                                ).load()
 
-    monkeypatch.setattr(commands, "compress", fake_compress)
+    monkeypatch.setattr(commands, "engine_law", fake_law)
     assert main(["macro", "spacer_20mm", "--out", str(tmp_path / "a")]) == 0
     assert main(["macro", "spacer_20mm", "--steps", "7", "--strain", "0.4", "--out", str(tmp_path / "b")]) == 0
-    assert calls == [(0.5, 50), (0.4, 7)]      # default: 50 steps to 50 % (the main job's converged law)
+    assert calls == [(0.7, 35), (0.7, 7)]      # macro_curve's default law: 35 plate steps to 70 %
     out = capsys.readouterr().out
-    # no seams, stress = k eps: F_max = 12100 mm^2 x k x 0.5 / 1000 = 6.05 k N (k = 130 kPa for 50 steps)
-    assert "max force 786.5 N at 10.00 mm (50 %)" in out
-    assert "force at 30 % (6.0 mm) 471.9 N" in out and "first contact at" in out
-    assert "computed, 7 steps to 40 %" in out
+    # no seams, stress = k eps: F_max = 12100 mm^2 x k x 0.5 / 1000 = 6.05 k N (k = 115 kPa for 35 steps)
+    assert "max force 695.8 N at 10.00 mm (50 %)" in out
+    assert "force at 30 % (6.0 mm) 417.4 N" in out and "first contact at" in out
+    assert "the large-motion engine to 70 % in 7 plate steps" in out
     with xr.open_dataset(tmp_path / "b" / "spacer_20mm_macro_noseam.nc") as ds:
         assert ds.force.values[-1] == pytest.approx(12.1 * 87.0 * 0.4)
     # a stored curve instead of computing one
@@ -391,23 +394,31 @@ def test_heartbeat_reports_a_long_block(caplog):
 
 def test_compress_with_the_large_motion_engine_and_friction(tmp_path, capsys):
     """``--geometry nonlinear --friction MU`` gives the API's large-motion curve (friction recorded,
-    energy balanced); friction with the linear model is a usage error, not a silent zero."""
+    energy balanced) in the default file; friction with the linear model is a usage error, not a
+    silent zero."""
     import homtex
 
     spacer = "cells/spacer_20mm.toml"
     out = tmp_path / "nl"
     assert main(["compress", spacer, "--strain", "0.02", "--steps", "2", "--geometry", "nonlinear",
                  "--friction", "0.2", "--out", str(out)]) == 0
-    with xr.open_dataset(out / "spacer_20mm_compression_nonlinear.nc") as ds:
+    with xr.open_dataset(out / "spacer_20mm_compression.nc") as ds:
         api = homtex.compress(homtex.load_cell(spacer), strain=0.02, steps=2, geometry="nonlinear",
                               contact=homtex.Contact(friction=0.2))
         np.testing.assert_allclose(ds.stress.values, api.stress.values, rtol=1e-8)
         assert ds.attrs["geometry"] == "nonlinear" and ds.attrs["friction_max"] == 0.2
         assert float(ds.friction_energy[-1]) > 0 and abs(float(ds.energy_balance[-1])) < 0.01
-    assert (out / "spacer_20mm_compression_nonlinear.png").exists()
-    assert main(["compress", spacer, "--friction", "0.2", "--out", str(tmp_path / "lin")]) == 2
+    assert (out / "spacer_20mm_compression.png").exists()
+    assert main(["compress", spacer, "--geometry", "linear", "--friction", "0.2", "--out", str(tmp_path / "lin")]) == 2
     assert "--geometry nonlinear" in capsys.readouterr().err
-    assert not (tmp_path / "lin" / "spacer_20mm_compression.nc").exists()
+    assert not (tmp_path / "lin").exists() or not list((tmp_path / "lin").iterdir())
+    # the linear model by name, in its own file, as compress(geometry="linear")
+    assert main(["compress", spacer, "--strain", "0.001", "--steps", "1", "--geometry", "linear",
+                 "--out", str(tmp_path / "lin")]) == 0
+    with xr.open_dataset(tmp_path / "lin" / "spacer_20mm_compression_linear.nc") as ds:
+        api = homtex.compress(homtex.load_cell(spacer), strain=0.001, steps=1, geometry="linear")
+        np.testing.assert_allclose(ds.stress.values, api.stress.values, rtol=1e-8)
+        assert ds.attrs["geometry"] == "linear"
 
 
 # ------------------------------------------------------------------ interrupts, empty --out, status

@@ -126,7 +126,7 @@ def test_ring_between_plates_matches_thin_ring_closed_form():
     comp = []
     for N in (64, 128):
         fr, fixed = ring(N, R, r)
-        ds = homtex.compress(fr, strain=1e-3, steps=1, fixed=fixed)
+        ds = homtex.compress(fr, strain=1e-3, steps=1, fixed=fixed, geometry="linear")
         assert ds.attrs["status"] == "ok"
         assert ds.attrs["thickness_mm"] == pytest.approx(2 * R + 2 * r)
         assert int(ds.active_yarn_plate[-1]) == 2 and int(ds.active_yarn_yarn[-1]) == 0
@@ -248,7 +248,7 @@ def periodic_cell(a=4.0, r=0.1, E=E0):
 
 def test_compress_periodic_cell_matches_hand_solution():
     fr, flex = periodic_cell()
-    ds = homtex.compress(fr, strain=0.05, steps=4)
+    ds = homtex.compress(fr, strain=0.05, steps=4, geometry="linear")
     assert ds.attrs["status"] == "ok" and ds.sizes["strain"] == 4
     for v in ("stress", "force", "plate_displacement", "active_contacts", "active_yarn_yarn",
               "active_yarn_plate", "max_penetration", "contact_iterations", "contact_energy"):
@@ -274,9 +274,9 @@ def test_compress_periodic_cell_matches_hand_solution():
 
 def test_compress_force_control_agrees_with_displacement_control():
     fr, flex = periodic_cell()
-    dsd = homtex.compress(fr, strain=0.05, steps=1)
+    dsd = homtex.compress(fr, strain=0.05, steps=1, geometry="linear")
     p_end = float(dsd.stress[-1])
-    dsf = homtex.compress(fr, pressure=p_end, steps=1, control="force")
+    dsf = homtex.compress(fr, pressure=p_end, steps=1, control="force", geometry="linear")
     assert dsf.attrs["status"] == "ok"
     assert float(dsf.strain[-1]) == pytest.approx(0.05, rel=1e-6)
     assert float(dsf.force[-1]) == pytest.approx(float(dsd.force[-1]), rel=1e-6)
@@ -285,7 +285,7 @@ def test_compress_force_control_agrees_with_displacement_control():
 def test_compress_keeps_partial_curve_on_failure():
     fr, flex = periodic_cell()
     ds = homtex.compress(fr, strain=0.2, steps=4, contact=Contact(enforcement="penalty", penalty=1.0,
-                                                                   max_penetration=0.05))
+                                                                   max_penetration=0.05), geometry="linear")
     # the penalty holds at small strain, then the overlap exceeds 5 % of the radius
     assert ds.attrs["status"] == "failed" and ds.attrs["status_detail"].startswith("failed at step")
     assert "penalty too soft" in ds.attrs["status_detail"]
@@ -351,7 +351,7 @@ def test_compress_reports_a_singular_operator_with_a_clear_status():
     (periodic self-loops carry no moment): the failed solve is reported, never returned."""
     fr = homtex.Frame([[0.0, 0.0, 0.0]], [[0, 0], [0, 0]], radius=0.05, E=3000.0, nu=0.3,
                       periods=[[1.0, 0, 0], [0, 1.0, 0]], images=[[1, 0], [0, 1]])
-    ds = homtex.compress(fr, strain=0.1, steps=2)
+    ds = homtex.compress(fr, strain=0.1, steps=2, geometry="linear")
     assert ds.attrs["status"] == "failed" and ds.attrs["status_detail"].startswith("failed at step 1")
     assert "singular" in ds.attrs["status_detail"]
     assert ds.sizes["strain"] == 0
@@ -424,9 +424,9 @@ def test_an_iterative_solver_meets_the_gap_tolerance_by_refinement():
     refinement it failed, naming solver='direct' and a larger gap_tol as remedies)."""
     cell = homtex.load_cell("spacer_20mm")
     with homtex.set_options(compress_solver="amg", tol=1e-8):
-        amg = homtex.compress(cell, strain=0.04, steps=2)
-        loose = homtex.compress(cell, strain=0.04, steps=2, contact=homtex.Contact(gap_tol=1e-7))
-    ref = homtex.compress(cell, strain=0.04, steps=2)
+        amg = homtex.compress(cell, strain=0.04, steps=2, geometry="linear")
+        loose = homtex.compress(cell, strain=0.04, steps=2, contact=homtex.Contact(gap_tol=1e-7), geometry="linear")
+    ref = homtex.compress(cell, strain=0.04, steps=2, geometry="linear")
     # beyond the cell's linear range, so flagged alike; the stresses the direct solver's
     assert amg.attrs["status"] == loose.attrs["status"] == ref.attrs["status"] == "flagged"
     assert "the linear model holds on this cell" in amg.attrs["status_detail"]

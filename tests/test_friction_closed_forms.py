@@ -172,9 +172,9 @@ def test_bad_friction_tables_are_named(table, culprit):
 def test_the_linear_model_refuses_friction():
     cell = homtex.load_cell("spacer_20mm")
     with pytest.raises(InputError, match="geometry=.nonlinear"):
-        homtex.compress(cell, strain=0.01, steps=1, contact=homtex.Contact(friction=0.3))
+        homtex.compress(cell, strain=0.01, steps=1, contact=homtex.Contact(friction=0.3), geometry="linear")
     with pytest.raises(InputError, match="friction"):
-        homtex.compress(cell, strain=0.01, steps=1, contact=homtex.Contact(plate_friction=0.3))
+        homtex.compress(cell, strain=0.01, steps=1, contact=homtex.Contact(plate_friction=0.3), geometry="linear")
     for bad in ({"friction": -0.3}, {"friction": np.nan}, {"friction": 11.0}, {"plate_friction": -1},
                 {"friction_slip": 0.0}, {"friction_slip": "1e-4"}, {"barrier_gap": 0.0}, {"barrier_gap": 0.9},
                 {"barrier_stiffness": -1.0}):

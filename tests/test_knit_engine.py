@@ -335,7 +335,8 @@ def test_a_yarn_pressed_onto_a_crossing_one_sits_F_over_k_to_the_one_over_n_insi
     with pytest.raises(homtex.InputError, match="smaller than the yarns"):
         homtex.solve_nonlinear(fr, fixed, None, contact=homtex.Contact(compression=homtex.YarnCompression(0.6, 1.0)))
     with pytest.raises(homtex.InputError, match="solid yarns"):
-        homtex.compress(homtex.load_cell("spacer_20mm"), strain=0.1, contact=homtex.Contact(compression=comp))
+        homtex.compress(homtex.load_cell("spacer_20mm"), strain=0.1, contact=homtex.Contact(compression=comp),
+                        geometry="linear")
 
 
 def test_the_plate_test_fit_recovers_a_power_law_and_reads_the_acrylic_test():

@@ -198,15 +198,16 @@ def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
 
     real = macro.compress
 
-    def fake_compress(c, *, strain, **kw):  # the yarn-level curve to 60 % is slow: a linear stand-in
-        if strain != 0.6:  # seam_profile's own small-strain modulus: the real thing
+    def fake_compress(c, *, strain, **kw):  # the engine's law to 70 % is slow: a linear stand-in
+        if np.ndim(strain) == 0:  # seam_profile's own small-strain modulus: the real thing
             return real(c, strain=strain, **kw)
-        calls.append(strain)
-        e = np.linspace(0.0, strain, 11)[1:]
+        calls.append(float(np.max(strain)))
+        e = np.linspace(0.0, float(np.max(strain)), 11)[1:]
         return xr.Dataset({"stress": ("strain", 40.0 * e)}, coords={"strain": e},
                           attrs={"thickness_mm": H0, "status": "ok"})
 
     monkeypatch.setattr(macro, "compress", fake_compress)
+    monkeypatch.setattr(macro, "engine_law", lambda c, strain, **k: fake_compress(c, strain=np.array([strain])))
     first = {}
     for d in (43.0, 24.0, 18.0):
         ds = macro_curve(cell, seam_distance=d, strain=0.6, steps=301,
@@ -216,5 +217,33 @@ def test_cell_path_uses_seam_profile_and_compress(monkeypatch):
         # the punch first meets the tallest column: the profile's cushion height (clipped at H0)
         assert ds.attrs["first_contact_mm"] == pytest.approx(H0 - hc, abs=0.05)
         first[d] = ds.attrs["first_contact_mm"]
-    assert calls == [0.6, 0.6, 0.6]
+    assert calls == [0.7, 0.7, 0.7]             # the default law: the engine's curve to 70 %
     assert first[43.0] < first[24.0] < first[18.0]
+
+
+def test_the_default_law_is_the_engines_curve_to_70_percent_computed_once(monkeypatch):
+    """macro_curve's default unseamed law: compress(geometry="nonlinear") to 70 % on the cell file's
+    friction, once per cell and process (the result cache), whatever strain the caller asks for."""
+    import xarray as xr
+
+    import homtex
+    import homtex.macro as macro
+    from homtex import cache
+
+    cache.clear_cache(disk=False)
+    cell = homtex.load_cell("spacer_20mm", build=False)
+    calls = []
+
+    def fake(c, *, strain, **kw):
+        calls.append((float(np.max(strain)), kw.get("geometry"), kw.get("contact")))
+        e = np.asarray(strain, dtype=float)
+        return xr.Dataset({"stress": ("strain", 40.0 * e, {"units": "kPa"})}, coords={"strain": e},
+                          attrs={"thickness_mm": H0, "status": "ok"})
+
+    monkeypatch.setattr(macro, "compress", fake)
+    a = macro_curve(cell, strain=0.3, steps=11)
+    b = macro_curve(cell, strain=0.5, steps=11)
+    assert calls == [(0.7, "nonlinear", None)]
+    assert a.attrs["status"] == b.attrs["status"] == "ok"
+    np.testing.assert_allclose(b.force.values[-1], 40.0 * 0.5 * a.attrs["plate_area_mm2"] * 1e-3, rtol=1e-12)
+    cache.clear_cache()

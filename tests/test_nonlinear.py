@@ -171,7 +171,7 @@ def test_ring_between_plates_with_large_rotations_matches_the_dead_load_solve():
     R, r, N = 10.0, 0.1, 48
     fr, fixed = ring(N, R, r)
     ds = homtex.compress(fr, strain=0.15, steps=3, fixed=fixed, geometry="nonlinear")
-    lin = homtex.compress(fr, strain=0.15, steps=3, fixed=fixed)
+    lin = homtex.compress(fr, strain=0.15, steps=3, fixed=fixed, geometry="linear")
     assert ds.attrs["status"] == "ok" and ds.attrs["geometry"] == "nonlinear"
     assert int(ds.active_yarn_plate[-1]) == 2          # only the two poles touch
     F = float(ds.force[-1])
@@ -193,7 +193,7 @@ def test_small_compression_agrees_with_the_linear_contact_solve():
     from test_contact import ring
 
     fr, fixed = ring(32, 10.0, 0.1)
-    lin = homtex.compress(fr, strain=5e-4, steps=1, fixed=fixed)
+    lin = homtex.compress(fr, strain=5e-4, steps=1, fixed=fixed, geometry="linear")
     nl = homtex.compress(fr, strain=5e-4, steps=1, fixed=fixed, geometry="nonlinear")
     closure = float(nl.plate_displacement[-1]) - 2 * (nl.attrs["barrier_gap_mm"] - float(nl.min_gap[-1]))
     assert float(nl.force[-1]) / closure == pytest.approx(float(lin.force[-1] / lin.plate_displacement[-1]), rel=2e-3)

@@ -1,4 +1,5 @@
-"""Seams: the yarn-level seam cell (default method) and the analytical foundation model."""
+"""Seams: the geometrically linear seam cell (kept for comparison) and the analytical foundation
+model; the seam sewn on the large-motion engine (the default) is tested in test_sewing.py."""
 
 import warnings
 
@@ -34,7 +35,8 @@ def cell4(cell):
 @pytest.fixture(scope="module")
 def prof(cell):
     """Yarn-level profiles on the small cell: {eps0: Dataset}."""
-    return {e: homtex.seam_profile(cell, seam_distance=D_SMALL, prestrain=e, steps=5, max_cuts=0) for e in (0.1, 0.2)}
+    return {e: homtex.seam_profile(cell, seam_distance=D_SMALL, prestrain=e, steps=5, max_cuts=0, geometry="linear")
+            for e in (0.1, 0.2)}
 
 
 # ---------------------------------------------------------------- geometry
@@ -91,7 +93,7 @@ def test_seam_cell_geometry(cell):
 
 # ---------------------------------------------------------------- yarn-level profile
 def test_zero_prestrain_flat_equals_thickness(cell):
-    ds = homtex.seam_profile(cell, seam_distance=24.0, prestrain=0.0)
+    ds = homtex.seam_profile(cell, seam_distance=24.0, prestrain=0.0, geometry="linear")
     assert ds.attrs["method"] == "yarn" and ds.attrs["status"] == "ok"
     np.testing.assert_allclose(ds.height.values, cell.info["thickness"], rtol=1e-12)
     assert float(ds.cushion_height) == pytest.approx(cell.info["thickness"])
@@ -123,10 +125,11 @@ def test_more_prestrain_lower_seam_and_more_force(prof):
 
 def test_two_stitch_supercell_same_profile(cell4):
     cell = cell4
-    one = homtex.seam_profile(cell, seam_distance=D_SMALL, prestrain=0.2, steps=5, max_cuts=0)
+    one = homtex.seam_profile(cell, seam_distance=D_SMALL, prestrain=0.2, steps=5, max_cuts=0, geometry="linear")
     # same load path (5 equal steps, no step cuts): the contact geometry is re-linearised per step,
     # so the answer depends on the path; on the same path the two cells solve the same problem
-    two = homtex.seam_profile(cell, seam_distance=D_SMALL, prestrain=0.2, stitches=2, steps=5, max_cuts=0)
+    two = homtex.seam_profile(cell, seam_distance=D_SMALL, prestrain=0.2, stitches=2, steps=5, max_cuts=0,
+                             geometry="linear")
     assert two.attrs["status"] == "ok" and two.attrs["ramp_steps"] == one.attrs["ramp_steps"] == 5
     dip = cell.info["thickness"] - float(one.seam_height)
     assert np.abs(two.height.values - one.height.values).max() < 1e-3 * dip
@@ -136,7 +139,8 @@ def test_two_stitch_supercell_same_profile(cell4):
 def test_mean_height_increases_with_seam_distance(cell, prof):
     # the yarn model's dip is local (a few mm), so the cushion MAX stays near the thickness (see
     # studies/calibrate_seam.py); the mean height (fabric volume per area) rises with d
-    m = [float(homtex.seam_profile(cell, seam_distance=d, prestrain=0.2, steps=2).height.mean())
+    m = [float(homtex.seam_profile(cell, seam_distance=d, prestrain=0.2, steps=2,
+                                 geometry="linear").height.mean())
          for d in (8.5, 21.2)]
     mid = float(prof[0.2].height.mean())
     assert m[0] < mid < m[1] < cell.info["thickness"]
@@ -169,14 +173,14 @@ def test_bad_seam_distance_and_options(cell):
         homtex.seam_profile(cell, seam_distance=24.0, method="magic")
     with pytest.raises(InputError, match="stitch_length 3"):
         homtex.seam_profile(cell.replace(**{"parameters.seam.stitch_length": 3.0}), seam_distance=24.0)
-    ds = homtex.seam_profile(cell, seam_distance=24.0, prestrain=0.0)
+    ds = homtex.seam_profile(cell, seam_distance=24.0, prestrain=0.0, geometry="linear")
     assert ds.attrs["effective_seam_distance_mm"] == pytest.approx(12 * cell.info["wale_spacing"])
     assert ds.attrs["requested_seam_distance_mm"] == 24.0
 
 
 def test_seam_compression_small(cell):
     from homtex.seams import seam_compression
-    ds = seam_compression(cell, seam_distance=8.5, strain=0.1, steps=2, prestrain=0.2, ramp_steps=2)
+    ds = seam_compression(cell, seam_distance=8.5, strain=0.1, steps=2, prestrain=0.2, ramp_steps=2, geometry="linear")
     assert ds.attrs["status"] == "ok", ds.attrs["status"]
     assert np.all(np.diff(ds.force.values) > 0) and ds.force.values[0] > 0
     np.testing.assert_allclose(ds.stress.values, ds.force.values / ds.attrs["area_mm2"] * 1e3)
@@ -188,7 +192,7 @@ def test_tension_only_thread_only_softens_and_only_where_slack(cell):
     """A thread that cannot push: identical to the beam thread while no stitch element is slack,
     never stiffer afterwards, and the punch reaching the seam line makes legs go slack."""
     from homtex.seams import seam_compression
-    kw = dict(seam_distance=8.5, strain=0.2, steps=4, prestrain=0.2, ramp_steps=2)
+    kw = dict(seam_distance=8.5, strain=0.2, steps=4, prestrain=0.2, ramp_steps=2, geometry="linear")
     to = seam_compression(cell, tension_only=True, **kw)
     beam = seam_compression(cell, tension_only=False, **kw)
     assert to.attrs["status"] == "ok" and beam.attrs["status"] == "ok"
@@ -221,12 +225,12 @@ def test_pdas_keeps_a_part_held_on_the_first_small_plate_step(cell4, monkeypatch
 
     monkeypatch.setattr(ContactSolver, "_pdas_loop", counting)
     cell = cell4                                  # the resolution these cases were found on
-    ds = seam_compression(cell, seam_distance=24.0, prestrain=0.4, strain=0.05, steps=5)
+    ds = seam_compression(cell, seam_distance=24.0, prestrain=0.4, strain=0.05, steps=5, geometry="linear")
     assert ds.attrs["status"] == "ok" and ds.sizes["strain"] >= 5
     assert max(unions) > 0                        # the fallback was needed here
     s = ds.stress.values
     assert np.all(np.isfinite(s)) and np.all(np.diff(s) > 0) and s[0] > 0
-    small = seam_compression(cell, seam_distance=24.0, prestrain=0.4, strain=0.02, steps=4)
+    small = seam_compression(cell, seam_distance=24.0, prestrain=0.4, strain=0.02, steps=4, geometry="linear")
     assert small.attrs["status"] == "ok" and small.sizes["strain"] == 4
     # the specimen settles between the touching plates before the test (a stitch loop that the
     # ramp's pin held sank 0.19 mm, so the first plate step used to meet nothing): force from step 1
@@ -337,7 +341,7 @@ def test_ramp_refuses_a_thread_that_went_through(cell):
         warnings.simplefilter("ignore")
         c = cell.replace(**{"parameters.bars.top_inlay.lapping": lap, "parameters.bars.bottom_inlay.lapping": lap,
                             "yarns.multifilament.bending_factor": 100.0, "yarns.multifilament.torsion_factor": 100.0})
-        p = homtex.seam_profile(c, seam_distance=24.0, prestrain=0.7, steps=8)
+        p = homtex.seam_profile(c, seam_distance=24.0, prestrain=0.7, steps=8, geometry="linear")
     assert p.attrs["status"] == "failed"
     assert "bobbin thread slipped through the bottom layer" in p.attrs["status_detail"]
 

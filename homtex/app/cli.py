@@ -3,11 +3,12 @@
     homtex run      [--out DIR] [--quick]       the main job (README's first command)
     homtex cell     CELL [--out DIR]            summary and picture of a unit cell
     homtex homogenize CELL [--solver S] [--out DIR]   effective stiffness of a periodic cell
-    homtex compress CELL [--strain 0.3] [--steps 20] [--geometry linear|nonlinear] [--friction MU] [--out DIR]
+    homtex compress CELL [--strain 0.3] [--steps 20] [--geometry nonlinear|linear] [--friction MU] [--out DIR]
     homtex seam     CELL --distance D [--prestrain EPS] [--method yarn|foundation] [--out DIR]
-    homtex macro    CELL [--distance D] [--steps 50 | --curve FILE.nc] [--strain 0.5] [--scatter S] ...
+    homtex macro    CELL [--distance D] [--steps 35 | --curve FILE.nc] [--strain 0.5] [--scatter S] ...
     homtex study    STUDY.toml --out DIR [--scheduler ADDRESS] [--workers N] [--keep-failed] [--connect-timeout S]
     homtex plot     FILE.nc [--out IMAGE] [--var NAME] [--sel DIM=VALUE]
+    homtex cache    [--clear]                   what the result cache holds (sewn seams, laws), or empty it
 
 CELL is a cell file path (.toml) or a shipped cell name (spacer_20mm, octet, ...).
 Exit status: 0 done (a result whose checks flag it, ``status`` "flagged", prints a warning line
@@ -92,8 +93,8 @@ def cmd_homogenize(args) -> None:
 
 def cmd_compress(args) -> None:
     if args.friction and args.geometry == "linear":
-        raise InputError(f"--friction {args.friction:g} needs --geometry nonlinear: the linear contact solve is "
-                         "frictionless")
+        raise InputError(f"--friction {args.friction:g} needs the large-motion engine (--geometry nonlinear, the "
+                         "default): the linear contact solve is frictionless")
     from .commands import compress_cell
 
     ds, paths = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
@@ -127,7 +128,7 @@ def cmd_macro(args) -> None:
     ds, paths, line = macro_cell(args.cell, _out(args, "results/macro"), seam_distance=args.distance,
                                  height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
                                  slack_travel=args.slack_travel, seam_method=args.seam_method,
-                                 steps=50 if args.steps is None else args.steps, strain=args.strain,
+                                 steps=args.steps, strain=args.strain,
                                  curve=args.curve)
     for p in paths:
         _say(f"  wrote {p}")
@@ -162,6 +163,18 @@ def cmd_plot(args) -> None:
     from .commands import plot_file
 
     _say(f"  wrote {plot_file(args.file, args.out, var=args.var, sel=args.sel)}")
+
+
+def cmd_cache(args) -> None:
+    from ..cache import cache_dir, clear_cache, list_cache
+
+    if args.clear:
+        _say(f"  removed {clear_cache()} cached result(s) from {cache_dir()}")
+        return
+    items = list_cache()
+    _say(f"  {cache_dir()}: {len(items)} cached result(s), {sum(b for _, _, b in items) / 1e6:.1f} MB")
+    for path, kind, size in items:
+        _say(f"    {kind:8s} {size / 1e3:9.1f} kB  {path.name}")
 
 
 # ----------------------------------------------------------------------------- argument types
@@ -307,21 +320,24 @@ def build_parser() -> Parser:
 
     s = sub.add_parser("compress", help="compression curve of a fabric cell between plates",
                        description="Yarn-level compression of a fabric cell between rigid plates (contact "
-                       "yarn-yarn and yarn-plate): <cell file stem>_compression.nc/.png.")
+                       "yarn-yarn and yarn-plate), by default on the large-motion engine with the cell file's "
+                       "friction, as homtex.compress: <cell file stem>_compression.nc/.png "
+                       "(<cell file stem>_compression_linear.nc/.png with --geometry linear).")
     s.add_argument("cell", metavar="CELL", help=CELL_HELP)
     s.add_argument("--strain", type=fraction, default=0.3, metavar="EPS",
                    help="final compression = plate displacement / thickness, a fraction in (0, 1) (default: "
-                        "%(default)s, i.e. 30 %%, the model's validity range)")
+                        "%(default)s, i.e. 30 %%)")
     s.add_argument("--steps", type=count, default=20, metavar="N",
-                   help="load steps, integer >= 1; contact is re-linearised per step, so more steps are more "
-                        "accurate (default: %(default)s; the main job uses 50 to 50 %%)")
-    s.add_argument("--geometry", choices=("linear", "nonlinear"), default="linear",
-                   help="linear: small rotations, frictionless contact, valid to about 30 %%; nonlinear: the "
-                        "large-motion engine (co-rotational beams, barrier contact, friction), to 70 %% and beyond "
-                        "(default: %(default)s)")
+                   help="load steps, integer >= 1; the engine halves a step that fails, the linear model "
+                        "re-linearises contact per step (default: %(default)s)")
+    s.add_argument("--geometry", choices=("linear", "nonlinear"), default="nonlinear",
+                   help="nonlinear: the large-motion engine (co-rotational beams, barrier contact, the cell "
+                        "file's friction), to 70 %% and beyond, as homtex.compress by default; linear: the "
+                        "small-rotation model, frictionless, valid only to the cell's [validity] "
+                        "linear_strain_limit (a curve beyond it is flagged) (default: %(default)s)")
     s.add_argument("--friction", type=non_negative, default=None, metavar="MU",
                    help="Coulomb coefficient (dimensionless) of every yarn-yarn and yarn-plate contact, >= 0 "
-                        "(needs --geometry nonlinear; default: the cell file's [contact] table, else 0)")
+                        "(the engine; not with --geometry linear; default: the cell file's [contact] table, else 0)")
     _add_out(s, "results/compress")
     s.set_defaults(func=cmd_compress)
 
@@ -349,9 +365,9 @@ def build_parser() -> Parser:
     s.add_argument("--distance", type=positive, default=None, metavar="D",
                    help="seam distance, mm, > 0 (default: no seams)")
     s.add_argument("--steps", type=count, default=None, metavar="N",
-                   help="load steps of the unseamed compression law computed to --strain, integer >= 1 "
-                        "(default: 50, step-converged to 50 %%, as in the main job; fewer steps are faster and "
-                        "stiffer beyond 40 %%)")
+                   help="plate steps of the unseamed compression law, the large-motion engine's curve to 70 %% "
+                        "with the cell file's friction, as macro_curve computes it (kept in the result cache), "
+                        "integer >= 1 (default: 35)")
     s.add_argument("--curve", metavar="FILE.nc", default=None,
                    help="a stored compression law instead: the .nc file `homtex compress` writes (default: none, "
                         "computed with --steps)")
@@ -403,6 +419,12 @@ def build_parser() -> Parser:
                    help="one value of a further dimension of --var, e.g. --sel row=11 --sel col=11 "
                         "(repeatable; default: none)")
     s.set_defaults(func=cmd_plot)
+    s = sub.add_parser("cache", help="list or clear the result cache",
+                       description="The result cache keeps cell computations (sewn seam cells, their profiles, "
+                       "the unseamed law of macro_curve) in $HOMTEX_CACHE_DIR (default ~/.cache/homtex), keyed "
+                       "by the cell's content, the parameters and the homtex version.")
+    s.add_argument("--clear", action="store_true", help="remove every cached result (default: list them)")
+    s.set_defaults(func=cmd_cache)
     for name, sp in sub.choices.items():   # --debug also after the command (homtex seam ... --debug)
         sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                         help="show the full traceback of an error")

@@ -17,10 +17,9 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.homogenize import homogenize
-from ..api import compress
 from ..cells import find_cell, load_cell, shipped_cells
 from ..errors import InputError
-from ..macro import macro_curve
+from ..macro import LAW_STEPS, LAW_STRAIN, engine_law, macro_curve
 from ..output.charts import save, seam_profile_chart
 from ..output.charts_data import chart, generic_chart, homogenization_chart
 from ..output.plot import plot_cell
@@ -105,11 +104,12 @@ def homogenize_cell(path, out: Path, *, solver="amg"):
     return ds, [nc, png]
 
 
-def compress_cell(path, out: Path, *, strain=0.3, steps=20, geometry="linear", friction=None):
-    """Yarn-level compression between rigid plates: ``<stem>_compression.nc/.png``
-    (``<stem>_compression_nonlinear`` with the large-motion engine)."""
+def compress_cell(path, out: Path, *, strain=0.3, steps=20, geometry="nonlinear", friction=None):
+    """Yarn-level compression between rigid plates, by default on the large-motion engine (as
+    ``homtex.compress``): ``<stem>_compression.nc/.png`` (``<stem>_compression_linear`` with
+    ``geometry="linear"``)."""
     cell = load(path)
-    name = f"{stem_of(cell)}_compression" + ("" if geometry == "linear" else "_nonlinear")
+    name = f"{stem_of(cell)}_compression" + ("" if geometry == "nonlinear" else "_linear")
     curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True, name=name,
                                         geometry=geometry, friction=friction)
     log.info(f"modulus {summ['modulus_kPa']:.1f} kPa; stress at 10/25/40 %: {summ['stress_10_kPa']:.2f} / "
@@ -175,12 +175,14 @@ def macro_summary(ds) -> str:
 
 
 def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0, pre_stress="thread",
-               slack_travel=None, seam_method="yarn", steps=50, strain=None, curve=None):
+               slack_travel=None, seam_method="yarn", steps=None, strain=None, curve=None):
     """Macro cushion layer of a seamed specimen under the 121 cm^2 plate:
     ``<stem>_macro_<noseam|d mm>.nc/.png``. The unseamed compression law comes from ``curve``
-    (a stored ``homtex compress`` netCDF file) or is computed to ``strain`` in ``steps`` steps
-    (default 50 to 50 %, step-converged as in the main job). ``strain``: final punch travel / thickness
-    (default 0.5; with a stored curve, where it ends, at most 0.5). Returns (Dataset, [paths], summary line)."""
+    (a stored ``homtex compress`` netCDF file) or is the large-motion engine's curve to 70 % in
+    ``steps`` plate steps (default 35), as ``macro_curve(cell)`` computes it
+    (:func:`homtex.macro.engine_law`, cached): the command and the API give the same answer.
+    ``strain``: final punch travel / thickness (default 0.5; with a stored curve, where it ends, at most
+    0.5). Returns (Dataset, [paths], summary line)."""
 
     cell = load(path)
     if curve is not None:
@@ -190,9 +192,11 @@ def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=
         source = f"stored curve {curve} ({law.sizes['strain']} points to {float(law.strain.max()):.3g})"
     else:
         strain = 0.5 if strain is None else strain
-        with heartbeat(f"compression law of {cell.name}: {steps} steps to {100 * strain:g} %"):
-            law = compress(cell, strain=strain, steps=steps, progress=True)
-        source = f"computed, {steps} steps to {100 * strain:g} %"
+        n = LAW_STEPS if steps is None else int(steps)
+        to = max(float(strain), LAW_STRAIN)
+        with heartbeat(f"compression law of {cell.name}: the engine to {100 * to:g} % in {n} steps"):
+            law = engine_law(cell, strain=to, steps=n)
+        source = f"computed, the large-motion engine to {100 * to:g} % in {n} plate steps"
     ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,
                      pre_stress=pre_stress, slack_travel=slack_travel, curve=law, strain=strain,
                      profile_options={"method": seam_method})

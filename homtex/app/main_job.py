@@ -78,8 +78,10 @@ def main_job(out: Path, *, quick: bool = False) -> dict:
 
     md = [f"# homtex main job ({'quick' if quick else 'full'}), {time.perf_counter() - t0:.0f} s", ""]
     md += ["## Cushion heights", "",
-           "yarn: the yarn-level seam cell (blind; its pre-strain is a nominal value, no value reaches "
-           "the paper's cushions); foundation: the analytical seam model, eps0 = the machine's needle-thread "
+           "yarn: the geometrically linear seam cell at its former nominal pre-strain 0.3 (it cannot form "
+           "cushions; the seam sewn on the large-motion engine, calibrated on 24 mm, gives "
+           "11.93 / 15.01 / 19.75 mm: docs/seams.md, python studies/experiments/calibrate_seam.py); "
+           "foundation: the analytical seam model, eps0 = the machine's needle-thread "
            "tension 40 % (assumption), layer rigidity calibrated once on d = 24 mm: 18 and 43 mm are "
            "predictions of that model.", "",
            _markdown_table(["d, mm (seam cell)", "yarn eps0", "yarn cushion, mm", "yarn seam line, mm",

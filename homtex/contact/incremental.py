@@ -1,10 +1,9 @@
 """Quasi-static steps of a co-rotational frame with large-motion contact and friction.
 
-:class:`IncrementalSolver` holds a state (translations, nodal rotations, plate heights, load
-factor, pre-strain scale) and takes it to the equilibrium of the next prescribed level:
-*state + scene + prescribed plate positions (or plate forces) + load factor + pre-strain scale
--> converged state, or SolverError with the state unchanged*. Each step minimises one potential
-over translations and nodal spins,
+:class:`IncrementalSolver` holds a state (translations, rotations, plate heights, load factor,
+pre-strain scale) and takes it to the equilibrium of the next prescribed level (or raises
+SolverError with the state unchanged). Each step minimises one potential over translations and
+nodal spins,
 
     Pi = U (co-rotational beams, :class:`~homtex.analysis.corotational.Corotational`)
        + B (IPC barrier, yarn-yarn and yarn-plate, :mod:`.ipc_scene`)
@@ -15,24 +14,21 @@ system is (H + M / delta) du = -g, H the symmetric part of the consistent beam t
 PSD contact and friction blocks, M a lumped diagonal of the beam tangent (frozen per step),
 delta the pseudo-time step adapted by switched evolution relaxation (delta grows with the
 residual's decrease; it shrinks when the factor shows negative pivots or the line search
-cuts). PTC changes the path to an equilibrium, not the equilibrium: the converged state has a
-zero free residual. The energy the pseudo-viscous term absorbs at fixed prescribed motions,
-sum du^T M du / delta over the corrector iterations, is recorded: small on smooth paths, large
-where the state jumps at a fixed plate position (snap-through, a buckling leg).
+cuts). PTC changes the path to an equilibrium, not the equilibrium. The energy the pseudo-viscous
+term absorbs at fixed prescribed motions (sum du^T M du / delta) is recorded: large where the
+state jumps at a fixed plate position (snap-through, a buckling leg).
 
 Every trial state is intersection-free: the step length is capped by the additive CCD of
-:mod:`.ccd` (yarn pairs, with the candidates searched again before a step can reach a pair
-outside the list) and the exact plate bound; prescribed motions (plates, supports) enter the
-first iterations as part of the Newton step (a linearised predictor cut by the CCD, never a jump
-through a yarn), then Newton corrects at the prescribed level with an Armijo line search on Pi.
+:mod:`.ccd` (candidates searched again before a step can reach a pair outside the list) and the
+exact plate bound; prescribed motions enter the first iterations as part of the Newton step (a
+predictor cut by the CCD), then Newton corrects with an Armijo line search on Pi.
 
 Friction is lagged: normal forces and tangent bases frozen at the step's start, re-lagged at
 the converged state until the nodes' normal forces settle (``friction_rounds``). The energy it
 dissipates over a step is the work of its forces along the straight path of the step.
 
-Energy bookkeeping (cumulative, per accepted state): external work (trapezoidal sum of the
-forces on prescribed DOFs, plates and loads times their motion), strain energy split, contact
-energy, friction dissipated, stabilisation absorbed, pre-strain work, and the balance.
+Energy bookkeeping (cumulative, per accepted state): external work (trapezoidal), strain energy
+split, contact energy, friction dissipated, stabilisation absorbed, pre-strain work, the balance.
 """
 
 from __future__ import annotations
@@ -46,7 +42,7 @@ from ..analysis.corotational import PARALLEL_ELEMENTS, Corotational
 from ..errors import InputError, SolverError
 from ..fem.corotational_system import apply_increment
 from ..model.frame import Frame
-from ..model.scene import Plate, Scene, parse_loads
+from ..model.scene import Scene, parse_loads
 from .ccd import pair_step_bound, plate_step_bound
 from .friction import friction_potential
 from .ipc_scene import PlateState
@@ -224,6 +220,7 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
         self.sys = None
         self._coupled = np.zeros((0, 2), dtype=np.int64)
         self.M = None
+        self.terms: list = []       # extra potentials scaled with the pre-strain (:meth:`add_term`)
         self.info = StepInfo()
         self.failure_indefinite = False
         self._hmax = 0.0            # largest diagonal entry of the last assembled Hessian
@@ -237,6 +234,23 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
                 self.ledger[k] = float(initial.ledger[k])
             self.ledger["strain_energy"] = self._ev0["U"] - self.ledger["U0"]
             self.ledger["contact_energy"] = self._ev0["B"] - self.ledger["B0"]
+
+    def add_term(self, term) -> None:
+        """Add a potential scaled by the pre-strain scale (a :class:`~homtex.contact.tension.ConstantTension`
+        thread) and restart the energy ledger (call before the first step)."""
+        self.terms.append(term)
+        with serial_numba(self.small):
+            self._start_ledger()
+
+    def restart_at(self, ut: np.ndarray, Q: np.ndarray) -> None:
+        """Move to the translations ``ut`` (n, 3, mm) and rotations ``Q`` (n, 3, 3) of an earlier solve of the
+        same frame and start the energy ledger there (a new path; the contacts are searched again)."""
+        self.cor.ut[...] = ut
+        self.cor.Q[...] = Q
+        with serial_numba(self.small):
+            self.scene.search(self.positions)
+            self._pattern()
+            self._start_ledger()
 
     # ------------------------------------------------------------------ state
     @property
@@ -584,8 +598,3 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
         self.plates.z += a * d[self.n:self.n + self.P, 2]
         if self.lat is not None:
             self._set_periods(self.lat.periods + a * d[self.lat.rows, :3])
-
-def plates_for(z_bottom: float, z_top: float) -> list:
-    """Two plates: fixed bottom (yarns above) and top (yarns below), both displacement-controlled."""
-    return [Plate(z=z_bottom, normal=1, displacement=0.0, name="bottom"),
-            Plate(z=z_top, normal=-1, displacement=0.0, name="top")]

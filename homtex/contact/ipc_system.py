@@ -139,7 +139,14 @@ class SystemMixin:
             g[self.lat.rows, :3] += self.lat.element_grad(self.cor.fe)
             x_start = self._xc(x_start, self._p_start)
         ev = {"U": float(self.cor.energy.sum()), "B": pc.energy + pl["energy"], "pairs": pc, "plates": pl,
-              "D": 0.0, "fric": [], "fint": fint}
+              "D": 0.0, "fric": [], "fint": fint, "terms": []}
+        for t in self.terms:        # potentials scaled with the pre-strain: booked with the strain energy
+            e, gt, nodes, H = t.evaluate(x, s, hessian)
+            ev["U"] += e
+            g[:self.n, :3] += gt
+            fint = fint + np.pad(gt, ((0, 0), (0, 3)))
+            if hessian:
+                ev["terms"].append((nodes, H))
         for lg in lag:
             if lg is None or not len(lg):
                 continue
@@ -151,6 +158,7 @@ class SystemMixin:
             self._fold(fr.grad, g)
         ev["g_contact"] = g[:, :3].copy()
         ev["g_contact"][:n] -= fint[:, :3]
+        ev["fint"] = fint
         g[:n] -= self.applied_loads()
         g[n:n + P, 2] -= self.plate_force
         if self.lat is not None:
@@ -170,6 +178,7 @@ class SystemMixin:
         slots = [self._slots(self._real(pc.hess_nodes)) if pc.n_active else None]
         fric = ev["fric"]
         slots += [self._friction_slots(lg) for lg, _ in fric]
+        slots += [self._slots(nodes) for nodes, _ in ev.get("terms", ())]
         if self.sys is not sys:
             sys = self.sys
             sys.assemble(self.cor.Ke)
@@ -181,6 +190,8 @@ class SystemMixin:
         for (lg, fr), sl in zip(fric, slots[1:]):
             sys.add_blocks(fr.hess, sl)
             self._lattice_blocks(fr.hess, lg.nodes)
+        for (_, H), sl in zip(ev.get("terms", ()), slots[1 + len(fric):]):
+            sys.add_blocks(H, sl)
         self._hmax = float(np.abs(sys.diagonal()).max(initial=0.0))
 
     def _friction_slots(self, lg):
@@ -202,10 +213,12 @@ class SystemMixin:
         if self.lat is not None:
             self.lat.element_hess_times(self.cor.Ke, d, out, self.frame.elements)
         pc, pl = ev["pairs"], ev["plates"]
+        real = [(H, nodes) for nodes, H in ev.get("terms", ())]   # thread terms: over real nodes
         if len(pl["active"]):           # plates: over (node, plate row) of the DOF arrays
-            nodes = self.scene.plate_block_nodes(pl["active"])
+            real.append((pl["blocks"], self.scene.plate_block_nodes(pl["active"])))
+        for H, nodes in real:
             v = d[:, :3][nodes].reshape(len(nodes), -1)
-            hv = np.einsum("rij,rj->ri", pl["blocks"], v).reshape(len(nodes), -1, 3)
+            hv = np.einsum("rij,rj->ri", H, v).reshape(len(nodes), -1, 3)
             np.add.at(out[:, :3], nodes.ravel(), hv.reshape(-1, 3))
         blocks = [(pc.hess, pc.hess_nodes)] if pc.n_active else []
         blocks += [(fr.hess, lg.nodes) for lg, fr in ev["fric"] if len(lg)]
@@ -336,7 +349,8 @@ class SystemMixin:
 
     def _prestrain_rate(self) -> float:
         f = self.frame
-        return float(np.sum(self.cor.forces[:, 6] * f.length * f.prestrain))
+        x = self.positions
+        return float(np.sum(self.cor.forces[:, 6] * f.length * f.prestrain)) + sum(t.rate(x) for t in self.terms)
 
     def _account(self, info, snap) -> None:
         ev = info.extra["ev"]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -10,7 +10,7 @@ from ..errors import InputError
 from ..model.compression import YarnCompression
 from ..validate import check_choice, check_int, check_number
 
-__all__ = ["Contact", "ENFORCEMENTS", "STRATEGIES"]
+__all__ = ["Contact", "ENFORCEMENTS", "LINEAR_ONLY", "STRATEGIES"]
 
 
 STRATEGIES = ("pdas", "removal")
@@ -21,11 +21,24 @@ MAX_FRICTION = 10.0
 
 ENFORCEMENTS = ("augmented", "penalty")
 
+#: the options of the linear contact solve (active set, enforcement, its linear systems) that the
+#: large-motion engine does not have; ``margin`` is shared, the barrier and friction options are
+#: the engine's
+LINEAR_ONLY = ("strategy", "enforcement", "penalty", "removal_fraction", "exclude_hops", "gap_tol", "max_penetration",
+               "max_iter", "max_updates", "reuse_amg", "reuse_tol", "detect_rounds", "detect_tol",
+               "penalty_growth_max", "initial_overlap", "max_forward_error")
+
 
 @dataclass
 class Contact:
     """Contact options: normal contact between yarns and with rigid plates, and (with
     ``geometry="nonlinear"``) Coulomb friction.
+
+    The active-set, enforcement and linear-system options (:data:`LINEAR_ONLY`: ``strategy`` to
+    ``initial_overlap``, and ``max_forward_error``) belong to the linear contact solve
+    (``solve_static``, ``compress(geometry="linear")``); ``friction`` to ``compression`` to the
+    large-motion engine (``compress``'s default, ``solve_nonlinear``); ``margin`` to both.
+    ``compress`` on the engine refuses a linear-only option set away from its default.
 
     Parameters
     ----------
@@ -113,6 +126,12 @@ class Contact:
     def has_friction(self) -> bool:
         """A nonzero friction coefficient was asked for (yarns or plates)."""
         return bool((self.friction or 0.0) > 0.0 or (self.plate_friction or 0.0) > 0.0)
+
+    def linear_only(self) -> dict:
+        """{name: value} of the options in :data:`LINEAR_ONLY` set away from their defaults: what
+        the large-motion engine would ignore."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name in LINEAR_ONLY and getattr(self, f.name) != f.default}
 
     def require_frictionless(self, what: str = "the linear contact solve") -> None:
         """InputError if friction (or a compressible yarn law) was asked for where only

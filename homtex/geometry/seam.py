@@ -137,7 +137,8 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
     Returns
     -------
     (frame, info): info has groups ({name: (m,) bool}, incl. "stitch"), layer ((m,) "top" |
-    "bottom" | "pile" | "stitch"), thickness, seam_x (x of the seam line), seam_distance (effective),
+    "bottom" | "pile" | "stitch"), element_source ((m_fabric,) the fabric cell's element each fabric
+    element copies), thickness, seam_x (x of the seam line), seam_distance (effective),
     requested_seam_distance, stitch_length, n_x, n_y, stitch_yarn (yarn id), stitch_EA (N, one strand),
     legs ((m,) bool), needle_nodes, bobbin_nodes, interlock_nodes, leg_top_nodes, leg_bottom_nodes.
     """
@@ -240,7 +241,7 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
         "legs": np.r_[np.zeros(m_f, dtype=bool), is_leg],
         "needle_nodes": needle, "bobbin_nodes": bobbin, "interlock_nodes": np.array(inter),
         "leg_top_nodes": np.array(leg_top), "leg_bottom_nodes": np.array(leg_bot),
-        "fabric_nodes": n0, "fabric_elements": m_f, "prestrain": eps0,
+        "fabric_nodes": n0, "fabric_elements": m_f, "prestrain": eps0, "element_source": elem_src,
         "wale_spacing": w, "course_spacing": cell.info.get("course_spacing"),
     }
     return frame, info

@@ -510,7 +510,8 @@ def _info(plans, bar_list, yarns, frame, elements, yarn, n_yarn_el, T, w, cs, W,
 
 #: keys of a spacer cell's [parameters.seam] table (read by homtex.seam_profile and seam_compression)
 SEAM_KEYS = ("stitch_length", "prestrain", "elements_per_mm", "leg_elements", "foundation_prestrain",
-             "layer_rigidity", "layer_rigidity_cell", "yarn")
+             "layer_rigidity", "layer_rigidity_cell", "yarn", "stitch", "tension", "ramp_steps", "method",
+             "calibration")
 
 
 def _check_seam_table(seam: dict, yarns: dict) -> None:
@@ -526,6 +527,13 @@ def _check_seam_table(seam: dict, yarns: dict) -> None:
     get_number(seam, "foundation_prestrain", t, default=0.0, ge=0, lt=1)
     get_number(seam, "layer_rigidity", t, required=False, gt=0, le=1e9)      # N mm^2 per stitch length
     get_str(seam, "layer_rigidity_cell", t, default="")
+    get_number(seam, "tension", t, required=False, ge=0, le=1e4)             # N per thread strand
+    get_int(seam, "ramp_steps", t, default=10, ge=1)
+    get_str(seam, "calibration", t, default="")
+    for key, choices in (("stitch", ("length", "tension")), ("method", ("yarn", "foundation"))):
+        v = seam.get(key)
+        if v is not None and v not in choices:
+            raise CellError(f"{v!r} is not one of {list(choices)}", table=t, key=key)
     name = get_str(seam, "yarn", t, default="stitch")
     if name not in yarns:
         raise CellError(f"no yarn type {name!r} for the stitch; the file defines {sorted(yarns)}", table=t, key="yarn")

@@ -1,6 +1,12 @@
 """A seamed spacer fabric between two rigid plates at the yarn level (the paper's Fig. 11):
-``seam_compression``. The seam cell is sewn (the stitch pre-strain ramped), both plates are
-moved onto its outer surfaces, and the top plate descends in steps (:func:`homtex.analysis.stepping.march`)."""
+``seam_compression``.
+
+By default the seam cell is sewn on the large-motion engine (:func:`homtex.seams.profile.sewn_seam`,
+cached) and pressed from its sewn state (:func:`homtex.seams.press.press_sewn`): the plate starts
+at the unseamed thickness, strain = plate travel / unseamed thickness, as in ``compress`` and
+``macro_curve``. ``geometry="linear"`` runs the former small-rotation seam cell
+(:func:`linear_seam_compression`: frictionless, contact re-linearised per step, strain from the
+sewn thickness), kept for comparison."""
 
 from __future__ import annotations
 
@@ -21,12 +27,14 @@ from ..geometry.seam import seam_cell
 from ..model.results import Status, set_status
 from ..model.scene import Plate
 from ..output.datasets import curve_dataset
-from ..validate import check_int, check_number
+from ..validate import check_choice, check_int, check_number
 from .foundation import seam_table
 from .measure import measure_profile
+from .press import press_sewn
+from .profile import sewn_seam
 from .yarn import SeamSolver
 
-__all__ = ["SlackThreads", "seam_compression"]
+__all__ = ["SlackThreads", "linear_seam_compression", "seam_compression", "strain_levels"]
 
 log = logging.getLogger(__name__)
 
@@ -41,13 +49,87 @@ _META = {"plate_displacement": ("mm", "top plate displacement from first contact
 _STRAIN = ("1", "compression strain (plate displacement / sewn thickness H0)")
 
 
-def seam_compression(cell: Cell, *, seam_distance: float | None, strain: float = 0.3, steps: int = 30,
-                     prestrain: float | None = None, contact: Contact | None = None, ramp_steps: int = 4,
-                     tension_only: bool = True) -> xr.Dataset:
-    """Yarn-level compression of a seamed spacer fabric between two rigid plates (paper's Fig. 11).
+def strain_levels(strain: float, steps: int) -> np.ndarray:
+    """The plate positions of an engine curve to ``strain`` in ``steps`` equal steps (strain = travel /
+    unseamed thickness), with the first step split in four (the unseamed pile buckles within the
+    first per cent). To 70 % in 35 steps these are the levels of
+    studies/experiments/spacer_engine_defaults.py; split in five, the unseamed spacer cell's curve
+    failed to converge at 68 % (also with 400 iterations per step), a path the engine does not follow."""
+    e = float(strain) * np.arange(1, int(steps) + 1) / int(steps)
+    return np.unique(np.round(np.r_[e[0] * np.arange(1, 4) / 4.0, e], 12))
+
+
+def seam_compression(cell: Cell, *, seam_distance: float | None, strain: float = 0.7, steps: int | None = None,
+                     geometry: str = "nonlinear", prestrain: float | None = None, tension: float | None = None,
+                     contact: Contact | None = None, ramp_steps: int | None = None, cache: bool = True,
+                     **options) -> xr.Dataset:
+    """Yarn-level compression of a seamed spacer fabric under the punch (the paper's Fig. 11).
+
+    Parameters
+    ----------
+    cell : spacer Cell with [parameters.seam].
+    seam_distance : d, mm (rounded to whole fabric repeats); None: the unseamed cell
+        (``homtex.compress(cell, geometry="nonlinear")`` on the same plate positions).
+    strain : final plate travel / unseamed thickness, in (0, 1) (the paper's test: 0.7).
+    steps : plate steps (default 35, 2 % each, the first split in five); the engine halves a step
+        that fails or whose energy ledger misses.
+    geometry : "nonlinear" (the large-motion engine, friction from the cell file) or "linear" (the
+        former small-rotation seam cell, :func:`linear_seam_compression`, which takes ``options``
+        tension_only and whose strain counts from the sewn thickness).
+    prestrain, tension : the stitch (see ``seam_profile``; None: the calibrated one).
+    contact : homtex.Contact (default: the cell file's friction).
+    ramp_steps : levels of the sewing ramp (default the cell file's ``ramp_steps``).
+    cache : reuse a sewn state from the result cache (:mod:`homtex.cache`).
+
+    Returns
+    -------
+    xarray.Dataset over ``strain`` (plate travel / unseamed thickness) with ``stress`` (kPa),
+    ``force`` (N on the cell), ``plate_displacement`` (mm), plate and stitch contacts, the
+    leg tension and the energy ledger; attrs status, thickness_mm (unseamed), sewn_thickness_mm,
+    first_contact_mm, cushion_height_mm, area_mm2, seconds.
+    """
+    check_choice(geometry, "geometry", ("linear", "nonlinear"))
+    strain = check_number(strain, "strain", gt=0.0, lt=1.0)
+    if geometry == "linear":
+        if tension is not None:
+            raise InputError("seam_compression(geometry='linear') takes prestrain=, not tension=")
+        return linear_seam_compression(cell, seam_distance=seam_distance, strain=strain,
+                                       steps=30 if steps is None else steps, prestrain=prestrain, contact=contact,
+                                       ramp_steps=4 if ramp_steps is None else ramp_steps, **options)
+    if options:
+        raise InputError(f"seam_compression(geometry='nonlinear'): unknown option(s) {sorted(options)}")
+    steps = check_int(35 if steps is None else steps, "steps", ge=1, le=10_000)
+    if contact is not None and not isinstance(contact, Contact):
+        raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
+    levels = strain_levels(strain, steps)
+    H0 = float(cell.info["thickness"])
+    t0 = time.perf_counter()
+    if seam_distance is None:
+        ds = compress(cell, strain=levels, geometry="nonlinear", contact=contact)
+        ds.attrs.update(seam_distance_mm="none", model="unseamed fabric cell (homtex.compress, large-motion engine)",
+                        cushion_height_mm=H0, sewn_thickness_mm=H0, first_contact_mm=0.0)
+        return ds
+    check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
+    sewn = sewn_seam(cell, seam_distance=seam_distance, prestrain=prestrain, tension=tension, contact=contact,
+                     steps=ramp_steps, cache=cache)
+    if sewn.status == "failed" and sewn.state is None:
+        raise SolverError(f"seam_compression: the seam could not be sewn: {sewn.detail}")
+    ds = press_sewn(sewn, levels, thickness=H0)
+    ds.attrs.update(sewn_status=sewn.status, sewn_seconds=float(sewn.attrs.get("seconds", 0.0)),
+                    seconds_total=time.perf_counter() - t0)
+    if sewn.status != "ok":
+        set_status(ds, Status.FAILED if sewn.status == "failed" else Status(ds.attrs["status"]),
+                   f"the sewing ramp {sewn.status}: {sewn.detail}")
+    return ds
+
+
+def linear_seam_compression(cell: Cell, *, seam_distance: float | None, strain: float = 0.3, steps: int = 30,
+                            prestrain: float | None = None, contact: Contact | None = None, ramp_steps: int = 4,
+                            tension_only: bool = True) -> xr.Dataset:
+    """Compression of the geometrically linear seam cell between two rigid plates (kept for comparison).
 
     The seam cell (:func:`homtex.geometry.seam.seam_cell`) is first brought to its sewn state (the
-    stitch pre-strain ramped as in :func:`yarn_profile`, plates far away); then both plates are
+    stitch pre-strain ramped as in :func:`linear_profile`, plates far away); then both plates are
     moved onto the outermost yarn surfaces (stitch included) and the top plate descends by
     ``strain`` x H0 in ``steps`` equal steps, H0 = the sewn specimen's thickness (initial plate
     distance). Stitch pre-strain stays on. Contact geometry is re-linearised per step.
@@ -86,7 +168,8 @@ def seam_compression(cell: Cell, *, seam_distance: float | None, strain: float =
         raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
     t0 = time.perf_counter()
     if seam_distance is None:
-        ds = compress(cell, strain=strain, steps=steps, contact=Contact() if contact is None else contact)
+        ds = compress(cell, strain=strain, steps=steps, contact=Contact() if contact is None else contact,
+                      geometry="linear")
         ds = ds.assign(cushion_plate_contacts=ds.active_yarn_plate.astype(float) * np.nan)
         ds.cushion_plate_contacts.attrs.update(units="1", long_name="not counted for the unseamed cell")
         ds.attrs.update(seam_distance_mm=float("nan"), model="unseamed fabric cell (homtex.compress)",

@@ -70,7 +70,8 @@ def seam_table(cell) -> dict:
 def fabric_modulus(cell, *, strain: float = 0.05, steps: int = 2) -> float:
     """Compression modulus E_c (MPa) of the unseamed cell: secant stress / strain at ``strain``.
 
-    Uses ``homtex.compress`` (yarn level, linear model, penalty contact); cached on the cell's info.
+    Uses ``homtex.compress(geometry="linear")`` (yarn level, the linear model by name, penalty contact);
+    cached on the cell's info.
     The foundation model is built on this linear secant modulus by definition (its layer rigidity is
     calibrated with it), so a curve "flagged" for going beyond the linear model's validity is used;
     only a failed one raises. The foundation model's own validity is that of its calibration
@@ -80,7 +81,7 @@ def fabric_modulus(cell, *, strain: float = 0.05, steps: int = 2) -> float:
     key = ("fabric_modulus", float(strain))
     if key in info:
         return info[key]
-    ds = compress(cell, strain=strain, steps=steps,
+    ds = compress(cell, strain=strain, steps=steps, geometry="linear",
                   contact=Contact(enforcement="penalty", penalty=option("modulus_penalty")))
     if ds.attrs["status"] == Status.FAILED:
         raise InputError(f"fabric_modulus: compression of cell {cell.name!r} failed: {ds.attrs['status_detail']}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["measure_profile", "thread_escape"]
+__all__ = ["leg_shortening", "measure_profile", "pile_legs", "thread_escape"]
 
 
 def _surface_nodes(frame, info):
@@ -76,3 +76,49 @@ def thread_escape(frame, info, u) -> str:
             out.append(f"the {thread} thread slipped through the {side} layer: the layer's mean height at the "
                        f"seam line is {-g[1]:.3g} mm on the wrong side of it (as sewn {g[0]:.3g} mm on the right side)")
     return "; ".join(out)
+
+
+
+def pile_legs(frame, info) -> list:
+    """The pile legs of a seam cell: arrays of element indices, one per leg from one layer to the other.
+
+    A leg is a connected run of pile elements (group "pile") that run through the thickness (their
+    direction's z component above half their length in the reference geometry; the pile's loops
+    inside the layers lie flat)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pile = np.asarray(info["groups"]["pile"], dtype=bool)
+    el = frame.elements
+    v = frame.element_vectors
+    idx = np.flatnonzero(pile & (np.abs(v[:, 2]) > 0.5 * np.linalg.norm(v, axis=1)))
+    if not len(idx):
+        return []
+    n = frame.n_nodes
+    g = coo_matrix((np.ones(len(idx)), (el[idx, 0], el[idx, 1])), shape=(n, n))
+    _, label = connected_components(g, directed=False)
+    lab = label[el[idx, 0]]
+    return [idx[lab == k] for k in np.unique(lab)]
+
+
+def leg_shortening(frame, info, u, legs=None):
+    """Per pile leg (:func:`pile_legs`): the x of its centre relative to the seam line (mm, in
+    [-d/2, d/2)) and the relative loss of its end-to-end length at displacement u (n, 6),
+    1 - |end-to-end| / reference (periodic jumps taken care of: the end-to-end vector is the sum of
+    the leg's element vectors oriented upwards). Returns ((k,), (k,))."""
+    legs = pile_legs(frame, info) if legs is None else legs
+    x1 = frame.nodes + np.asarray(u)[:frame.n_nodes, :3]
+    v0 = frame.element_vectors
+    el = frame.elements
+    sh = frame.shift
+    v1 = x1[el[:, 1]] + sh - x1[el[:, 0]]
+    d = float(info["seam_distance"])
+    xc, loss = [], []
+    for e in legs:
+        sgn = np.sign(v0[e, 2])[:, None]
+        r0 = float(np.linalg.norm((sgn * v0[e]).sum(axis=0)))
+        r1 = float(np.linalg.norm((sgn * v1[e]).sum(axis=0)))
+        loss.append(1.0 - r1 / r0 if r0 > 0 else 0.0)
+        xm = float(x1[el[e, 0], 0].mean()) - float(info["seam_x"])
+        xc.append((xm + 0.5 * d) % d - 0.5 * d)
+    return np.array(xc), np.array(loss)

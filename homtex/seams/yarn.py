@@ -1,48 +1,44 @@
-"""Seams at the yarn level: the seam cell sewn by ramping the stitch pre-strain, its cushion
-profile, and ``seam_profile``, which dispatches to this model or to the analytical one
-(:mod:`homtex.seams.foundation`).
+"""The geometrically linear seam cell (``seam_profile(method="yarn", geometry="linear")``): the
+seam cell sewn by ramping the stitch pre-strain with small-rotation beams and frictionless
+contact re-linearised per load step. It cannot form cushions (its seam dip decays over about
+2.6 mm; docs/seams.md); it is kept for comparison and for ``seam_compression(geometry="linear")``.
+The default yarn-level seam model runs on the large-motion engine (:mod:`homtex.seams.sew`,
+:mod:`homtex.seams.profile`).
 
 The seam cell (:func:`homtex.geometry.seam.seam_cell`) is the fabric cell tiled over one seam
 distance and one stitch length with a lock stitch 301 whose elements carry the pre-strain
-eps0; :class:`SeamSolver` raises eps0 in load steps with yarn-yarn contact (linear beams with
-contact re-linearised per step, or co-rotational beams). The profile h(x) is measured on the
-outer yarn surfaces (:func:`homtex.seams.measure.measure_profile`). What this model does and
-does not reproduce is measured in docs/seams.md.
+eps0; :class:`SeamSolver` raises eps0 in load steps with yarn-yarn contact. The profile h(x) is
+measured on the outer yarn surfaces (:func:`homtex.seams.measure.measure_profile`).
 """
 
 from __future__ import annotations
 
-import inspect
 import logging
 import time
 
 import numpy as np
 import xarray as xr
 
-from ..analysis.nonlinear import Corotational
 from ..analysis.stepping import StepFailure, march
 from ..cells import Cell
 from ..config import option
-from ..contact.newton import newton_contact
 from ..contact.options import Contact
 from ..contact.solver import ContactSolver
 from ..errors import InputError, SolverError
 from ..geometry.seam import seam_cell
 from ..model.results import Status, set_status
 from ..model.scene import default_pins
-from ..validate import check_choice, check_int, check_number
-from .foundation import SLACK_LONG_NAME, foundation_profile, seam_table
+from ..validate import check_int, check_number
+from .foundation import SLACK_LONG_NAME, seam_table
 from .measure import measure_profile, thread_escape
 
-__all__ = ["GEOMETRIES", "SeamSolver", "seam_profile", "yarn_profile"]
+__all__ = ["SeamSolver", "linear_profile"]
 
 log = logging.getLogger(__name__)
 
-GEOMETRIES = ("linear", "nonlinear")
-
 
 class SeamSolver:
-    """Contact solve of a seam cell with the stitch pre-strain ramped in load steps.
+    """Linear contact solve of a seam cell with the stitch pre-strain ramped in load steps.
 
     Parameters
     ----------
@@ -58,10 +54,7 @@ class SeamSolver:
     the fabric find their own relative height).
     """
 
-    def __init__(self, frame, info, *, contact=None, plates=(), solver: str | None = None,
-                 geometry: str = "linear", stabilize: float = 0.0):
-        if geometry not in GEOMETRIES:
-            raise InputError(f"geometry must be one of {GEOMETRIES}, got {geometry!r}")
+    def __init__(self, frame, info, *, contact=None, plates=(), solver: str | None = None):
         self.frame, self.info = frame, info
         nf = int(info["fabric_nodes"])
         fix = {k: v for k, v in default_pins(frame).items() if k < nf}
@@ -75,10 +68,6 @@ class SeamSolver:
         self.contact = Contact() if contact is None else contact
         self.solver = option("compress_solver", solver)
         self.cs = ContactSolver(frame, fix, None, self.contact, plates=list(plates), solver=self.solver)
-        self.geometry = geometry
-        self.stabilize = float(stabilize)
-        self.cor = Corotational(frame, self.cs.assembler) if geometry == "nonlinear" else None
-        self.plate_u = None
         self.alpha = 0.0
         self.u_ref = None
         self.warm = None
@@ -95,16 +84,9 @@ class SeamSolver:
         """Contact solve at pre-strain factor alpha from the accepted state; a cycling active set
         is retried once from a cold start (active set from the gaps instead of the previous
         step's contacts)."""
-        if self.cor is not None:
-            def run(warm):
-                res, pu, _ = newton_contact(self.cs, self.cor, prestrain_scale=alpha, plate_u=self.plate_u,
-                                            warm_keys=warm, stabilize=self.stabilize)
-                self.plate_u = pu
-                return res
-        else:
-            def run(warm):
-                self.cs.set_prestrain_scale(alpha)
-                return self.cs.solve(u_ref=self.u_ref, warm_keys=warm)
+        def run(warm):
+            self.cs.set_prestrain_scale(alpha)
+            return self.cs.solve(u_ref=self.u_ref, warm_keys=warm)
         try:
             return run(self.warm)
         except SolverError:
@@ -157,11 +139,11 @@ class SeamSolver:
         return self.history
 
 
-def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = None, steps: int = 4,
-                 stitches: int = 1, exact: bool = False, contact=None, elements_per_mm: float | None = None,
-                 leg_elements: int | None = None, max_cuts: int = 4, geometry: str = "linear",
-                 stabilize: float = 0.0) -> xr.Dataset:
-    """Cushion profile from the yarn-level seam cell (``seam_profile(method="yarn")``).
+def linear_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = None, steps: int = 4,
+                   stitches: int = 1, exact: bool = False, contact=None, elements_per_mm: float | None = None,
+                   leg_elements: int | None = None, max_cuts: int = 4) -> xr.Dataset:
+    """Cushion profile from the geometrically linear seam cell (``seam_profile(method="yarn",
+    geometry="linear")``).
 
     Parameters
     ----------
@@ -174,9 +156,6 @@ def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
         in a row). The contact geometry is re-linearised per step, so the answer depends somewhat on
         the steps (see the report); compare cells on the same step path.
     stitches : stitches along y in the cell (2: a 2-stitch supercell, same answer expected).
-    geometry : "linear" (small rotations) or "nonlinear" (co-rotational beams, Newton iterations
-        per load step: the pile yarns may tilt and buckle under the stitch); ``stabilize``: viscous
-        stabilisation of the nonlinear steps (:func:`homtex.contact.newton.newton_contact`).
 
     Returns
     -------
@@ -193,8 +172,6 @@ def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
     if not isinstance(exact, (bool, np.bool_)):
         raise InputError(f"exact must be True or False, got {exact!r}")
     max_cuts = check_int(max_cuts, "max_cuts", ge=0, le=20)
-    check_choice(geometry, "geometry", GEOMETRIES)
-    check_number(stabilize, "stabilize", ge=0.0, lt=1.0)
     if contact is not None and not isinstance(contact, Contact):
         raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
     epm = check_number(seam.get("elements_per_mm", 1.0) if elements_per_mm is None else elements_per_mm,
@@ -213,7 +190,7 @@ def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
     iters = 0
     if eps0 > 0.0:
         try:
-            ss = SeamSolver(frame, info, contact=contact, geometry=geometry, stabilize=stabilize)
+            ss = SeamSolver(frame, info, contact=contact)
             hist = ss.ramp(steps, max_cuts=max_cuts)
             res = ss.result
             u = res.u
@@ -245,13 +222,12 @@ def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
          "seam_distance": ((), d_eff, {"units": "mm", "long_name": "effective seam distance (whole fabric repeats)"})},
         coords={"x": ("x", x, {"units": "mm", "long_name": "position across the seam (0 = seam line)"})})
     ds.attrs.update(
-        model="yarn", method="yarn",
+        model="yarn", method="yarn", geometry="linear",
         validity="the yarn-level seam dips only locally (decay length ~2.6 mm): the cushion stays near the "
         "fabric thickness and does NOT reproduce measured cushion heights; eps0 is a nominal value, not "
-        "calibrated (docs/seams.md; method='foundation' is the calibrated model)",
+        "calibrated (docs/seams.md)",
         description="yarn-level seam cell (lock stitch 301, pre-strained stitch yarn, yarn-yarn contact; "
-        + ("co-rotational beams, Newton iterations per load step)" if geometry == "nonlinear" else
-           "geometrically linear beams, contact re-linearised per load step)"), geometry=geometry,
+        "geometrically linear beams, contact re-linearised per load step)",
         requested_seam_distance_mm=float(info["requested_seam_distance"]), effective_seam_distance_mm=d_eff,
         stitch_length_mm=float(info["stitch_length"]), stitches=int(stitches), thickness_mm=float(info["thickness"]),
         n_nodes=int(frame.n_nodes), n_elements=int(frame.n_elements), repeats_x=int(info["n_x"]),
@@ -259,36 +235,4 @@ def yarn_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = 
         leg_clearance_mm=float(info["leg_clearance"]), seconds=seconds, build_seconds=t_build,
         stitch_elements_per_mm=epm, leg_elements=nl)
     return set_status(ds, status, detail)
-
-
-def seam_profile(cell: Cell, *, seam_distance: float, prestrain: float | None = None, method: str = "yarn",
-                 **options) -> xr.Dataset:
-    """Cushion profile of a spacer fabric with parallel lock-stitch seams.
-
-    Parameters
-    ----------
-    cell : spacer Cell (``cells/spacer_20mm.toml``) with a [parameters.seam] table.
-    seam_distance : d, mm.
-    prestrain : stitch-yarn pre-strain eps0; None: the value calibrated for the method
-        (yarn: ``[parameters.seam] prestrain``; foundation: ``foundation_prestrain``).
-    method : "yarn" (default, :func:`yarn_profile`, the yarn-level seam cell) or "foundation"
-        (:func:`foundation_profile`, the analytical beam-on-foundation model, its layer rigidity
-        calibrated on d = 24 mm).
-    options : passed on (yarn: steps, stitches, exact, contact, elements_per_mm, leg_elements;
-        foundation: points, exact_wales).
-
-    Returns
-    -------
-    xarray.Dataset with ``height`` (mm) over ``x`` (mm, 0 = seam line), scalar ``cushion_height``
-    (mm), ``seam_height`` (mm), ``stitch_force`` (N), ``prestrain``; attrs ``method``, ``status``,
-    ``effective_seam_distance_mm``.
-    """
-    check_choice(method, "method", ("yarn", "foundation"))
-    fn = yarn_profile if method == "yarn" else foundation_profile
-    allowed = set(inspect.signature(fn).parameters) - {"cell", "seam_distance", "prestrain"}
-    unknown = sorted(set(options) - allowed)
-    if unknown:
-        raise InputError(f"seam_profile(method={method!r}): unknown option(s) {unknown}; allowed: {sorted(allowed)}")
-    return fn(cell, seam_distance=seam_distance, prestrain=prestrain, **options)
-
 

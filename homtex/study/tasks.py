@@ -183,7 +183,8 @@ def index_dim(ds, dim: str, new: str, long_name: str):
 
 @register_task("compress")
 def compress_task(cell, **options):
-    """Compression curve (``homtex.compress``) over ``step`` (strain is a variable)."""
+    """Compression curve (``homtex.compress``: the large-motion engine, unless the study's options
+    name ``geometry = "linear"``) over ``step`` (strain is a variable)."""
     return index_dim(compress(cell, **options), "strain", "step", "load step (1-based order of the curve)")
 
 

@@ -59,8 +59,9 @@ def main(argv=None) -> None:
     runs = {
         "nonlinear, friction 0.2": lambda: homtex.compress(cell, strain=strain, steps=steps, geometry="nonlinear",
                                                            contact=homtex.Contact(friction=0.2)),
-        "nonlinear, frictionless": lambda: homtex.compress(cell, strain=strain, steps=steps, geometry="nonlinear"),
-        "linear (frictionless)": lambda: homtex.compress(cell, strain=strain, steps=steps),
+        "nonlinear, frictionless": lambda: homtex.compress(cell, strain=strain, steps=steps, geometry="nonlinear",
+                                                           contact=homtex.Contact(friction=0.0)),
+        "linear (frictionless)": lambda: homtex.compress(cell, strain=strain, steps=steps, geometry="linear"),
     }
     names, med, lo, hi, levels, status, its, per_it = [], [], [], [], [], [], [], []
     curves = {}

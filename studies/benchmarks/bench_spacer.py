@@ -32,16 +32,16 @@ def run(out: Path, *, strain: float = 0.3, steps: int = 20, seam_distance: float
 
     cell = homtex.load_cell("spacer_20mm")
     con = homtex.Contact(enforcement="penalty", penalty=5000.0)
-    homtex.compress(cell, strain=0.03, steps=2, contact=con)   # JIT warm-up
+    homtex.compress(cell, strain=0.03, steps=2, contact=con, geometry="linear")   # JIT warm-up
     t = time.perf_counter()
-    ds = homtex.compress(cell, strain=strain, steps=steps, contact=con)
+    ds = homtex.compress(cell, strain=strain, steps=steps, contact=con, geometry="linear")
     t_curve = time.perf_counter() - t
     iters = int(ds.contact_iterations.sum())
     c2 = homtex.load_cell("spacer_20mm")
     if seam_resolution is not None:
         c2 = c2.replace(**{"resolution.elements_per_segment": seam_resolution})
     t = time.perf_counter()
-    p = homtex.seam_profile(c2, seam_distance=seam_distance, steps=seam_steps)
+    p = homtex.seam_profile(c2, seam_distance=seam_distance, steps=seam_steps, prestrain=0.3, geometry="linear")
     t_seam = time.perf_counter() - t
     e = ds.strain.values
     s = ds.stress.values

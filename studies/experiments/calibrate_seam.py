@@ -1,25 +1,31 @@
-"""Calibrate the stitch pre-strain eps0 of the YARN-level seam model once on d = 24 mm, then predict 18 and 43 mm.
+"""Calibrate the stitch of the yarn-level seam on the large-motion engine once on d = 24 mm, then
+predict 18 and 43 mm and the paper's low-tension case, with nothing changed.
+
+The seam cell (``cells/spacer_20mm.toml``, its friction and resolution) is sewn with a
+length-controlled lock stitch (:func:`homtex.seams.sew.sew`): :func:`homtex.seams.calibrate.calibrate_stitch`
+finds the pre-strain eps0 whose cushion at d = 24 mm is the measured 15 mm (Table 1 of the paper;
+a ramp brackets it, sewings at the interpolated eps0 check it). With that eps0 the 18 and 43 mm
+cells are sewn (predictions), and 43 mm again at the paper's low needle-thread setting (its "15 %
+relative strain", mapped by ``homtex.seams.paper_setting``: 15/40 of the calibrated eps0). Recorded
+per sewing: the profile, cushion and seam-line heights, the loss of end-to-end length of every
+pile leg (the low-tension test: no leg within 3 mm of the seam loses more than 5 %), contacts,
+branch switches, energy balance, wall and CPU time. The foundation model's cushions are shown beside.
 
 Usage::
 
-    python studies/experiments/calibrate_seam.py [--out DIR] [--quick | --full]
+    python studies/experiments/calibrate_seam.py [--quick] [--out DIR] [--prestrain EPS]
 
-Default: 5-point scan, a few minutes here; ``--full``: a finer scan. ``--quick``: the same steps
-on d = 12 mm (scan at eps0 0.15 and 0.3, the prediction and the 15 % case for 12 mm only), on the
-cell with 1 element per segment and 1 ramp step (seconds; the numbers are not the study's).
-
-Calibration target: the paper's simulated cushion height 14.33 mm for d = 24 mm (the measured value
-is 15 mm; the paper's simulation is the like-for-like model target). eps0 is scanned on d = 24 mm
-(default grid 0.05 .. 0.45; --full: a finer grid); if the target lies inside the scanned range of
-cushion heights it is bracketed and refined (brentq) and the result is written into the dataset
-(store it as ``[parameters.seam] prestrain`` in cells/spacer_20mm.toml); otherwise the script says
-so and does NOT invent a value: the profiles for 18 / 24 / 43 mm are then shown at the cell file's
-current (uncalibrated, nominal) eps0, next to the 15 % case for 43 mm and the foundation model.
-
-Writes DIR/calibrate_seam.nc (scan, predictions, measured and paper values, timings) and
-DIR/calibrate_seam.png (default DIR = results/calibrate_seam).
+``--prestrain EPS`` skips the calibration and uses EPS (e.g. the cell file's value, to regenerate
+the predictions). ``--quick``: one sewing of d = 8.5 mm at eps0 = 0.15 in 2 ramp levels, no
+calibration and no low-tension case (seconds; the numbers are not the study's). Writes ``calibrate_seam.nc`` and ``calibrate_seam.png`` into OUT (default
+results/calibrate_seam). Full run: about 10 minutes on the 2-core machine.
 """
+
+from __future__ import annotations
+
+import logging
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,127 +34,149 @@ import xarray as xr
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
-TARGET = 14.33
-paper = {18.0: 10.23, 24.0: 14.33, 43.0: 20.3}
-measured = {18.0: 8.0, 24.0: 15.0, 43.0: 20.0}
+log = logging.getLogger("studies")
+
+PAPER = {18.0: 10.23, 24.0: 14.33, 43.0: 20.3}        # mm, the paper's simulated cushions
+MEASURED = {18.0: 8.0, 24.0: 15.0, 43.0: 20.0}        # mm, Table 1 (18 mm: the text also says 12 on average)
 
 
-def status_text(ds) -> str:
-    """'ok', or 'failed: <why>' (curves and profiles carry attrs status and status_detail)."""
-    st = str(ds.attrs.get("status", "ok"))
-    return st if st == "ok" else f"{st}: {ds.attrs.get('status_detail', '')}"
-
-
-def run(out: Path, *, full: bool = False, quick: bool = False) -> xr.Dataset:
+def sew_row(cell, d, eps, steps):
     import homtex
+    from homtex.seams.profile import profile_dataset
+    from homtex.seams.sew import sew
 
-    cell = homtex.load_cell("spacer_20mm")
-    D = [18.0, 24.0, 43.0]
-    d_cal = 24.0                  # the calibration distance (the paper's 14.33 mm)
-    kw = {}
-    if quick:
-        cell = cell.replace(**{"resolution.elements_per_segment": 1})
-        D, d_cal, kw = [12.0], 12.0, {"steps": 1}
-
-    # ---- scan on d = d_cal (24 mm)
-    grid = np.array([0.15, 0.3]) if quick else np.round(np.arange(0.05, 0.451, 0.025 if full else 0.1), 4)
-    scan_c, scan_s, scan_t, scan_ok = [], [], [], []
-    for e in grid:
-        p = homtex.seam_profile(cell, seam_distance=d_cal, prestrain=float(e), **kw)
-        scan_c.append(float(p.cushion_height))
-        scan_s.append(float(p.seam_height))
-        scan_t.append(p.attrs["seconds"])
-        scan_ok.append(p.attrs["status"] == "ok")
-        print(f"eps0 {e:.3f}: cushion {scan_c[-1]:.3f} mm, seam {scan_s[-1]:.3f} mm, {scan_t[-1]:.1f} s, "
-              f"{status_text(p)[:80]}")
-    c = np.array(scan_c)
-    ok = np.array(scan_ok) & np.isfinite(c)
-    calibrated = np.nan
-    calib_status = "target not reached"
-    cs = c[ok]
-    if ok.any() and cs.min() <= TARGET <= cs.max():
-        from scipy.optimize import brentq
-        i = int(np.flatnonzero(ok & (c - TARGET <= 0))[0])
-        lo = grid[max(i - 1, 0)]
-        calibrated = brentq(lambda e: float(homtex.seam_profile(cell, seam_distance=d_cal, prestrain=e,
-                                                                **kw).cushion_height) - TARGET, lo, grid[i], xtol=1e-4)
-        calib_status = "calibrated"
-    else:
-        calib_status = (f"target {TARGET} mm NOT reachable: over eps0 in [{grid[0]}, {grid[-1]}] the yarn model's "
-                        f"cushion height (max h) stays in [{np.nanmin(cs) if ok.any() else np.nan:.2f}, "
-                        f"{np.nanmax(cs) if ok.any() else np.nan:.2f}] mm (the seam dip is local and the cushion "
-                        "bulges slightly): no eps0 is stored from this calibration")
-    print(calib_status)
-    eps_used = float(calibrated) if np.isfinite(calibrated) else float(cell.parameters["seam"]["prestrain"])
-
-    # ---- predictions with nothing changed
-    rows, profiles, secs, stat = [], [], [], []
-    for d in D:
-        p = homtex.seam_profile(cell, seam_distance=d, prestrain=eps_used, **kw)
-        rows.append(float(p.cushion_height))
-        profiles.append(p)
-        secs.append(p.attrs["seconds"])
-        stat.append(status_text(p))
-        print(f"d {d:g} (effective {p.attrs['effective_seam_distance_mm']:.2f}) mm: cushion {rows[-1]:.2f} mm, seam "
-              f"{float(p.seam_height):.2f} mm, stitch force {float(p.stitch_force):.2f} N, {secs[-1]:.1f} s, {stat[-1][:60]}")
-    p15 = homtex.seam_profile(cell, seam_distance=D[-1], prestrain=0.15, **kw)
-    fnd = [homtex.seam_profile(cell, seam_distance=d, method="foundation") for d in D]
-    res = xr.Dataset({
-        "scan_cushion_height": ("prestrain_scan", c, {"units": "mm", "long_name": f"cushion height, d = {d_cal:g} mm, yarn model"}),
-        "scan_seam_height": ("prestrain_scan", np.array(scan_s), {"units": "mm", "long_name": f"seam height, d = {d_cal:g} mm, yarn model"}),
-        "scan_seconds": ("prestrain_scan", np.array(scan_t), {"units": "s", "long_name": "wall time per seam solve"}),
-        "cushion_height": ("seam_distance", rows, {"units": "mm", "long_name": "cushion height, yarn model"}),
-        "seam_height": ("seam_distance", [float(p.seam_height) for p in profiles], {"units": "mm", "long_name": "seam height, yarn model"}),
-        "effective_seam_distance": ("seam_distance", [p.attrs["effective_seam_distance_mm"] for p in profiles], {"units": "mm", "long_name": "seam distance of the cell (whole fabric repeats)"}),
-        "seconds": ("seam_distance", secs, {"units": "s", "long_name": "wall time of the seam solve"}),
-        "foundation_cushion_height": ("seam_distance", [float(p.cushion_height) for p in fnd], {"units": "mm", "long_name": "cushion height, foundation model (layer rigidity calibrated on 24 mm)"}),
-        "paper_simulation": ("seam_distance", [paper.get(d, np.nan) for d in D], {"units": "mm", "long_name": "cushion height simulated in the paper"}),
-        "measured": ("seam_distance", [measured.get(d, np.nan) for d in D], {"units": "mm", "long_name": "cushion height measured (Table 1; 18 mm: 8, text 12)"}),
-        "cushion_height_15pct_43": ((), float(p15.cushion_height), {"units": "mm", "long_name": f"cushion height d={D[-1]:g} mm, eps0=0.15"}),
-        "seam_height_15pct_43": ((), float(p15.seam_height), {"units": "mm", "long_name": f"seam height d={D[-1]:g} mm, eps0=0.15"}),
-        "calibrated_prestrain": ((), calibrated, {"units": "1", "long_name": f"eps0 calibrated on d = {d_cal:g} mm (NaN: target not reachable)"}),
-        "prestrain_used": ((), eps_used, {"units": "1", "long_name": "eps0 used for the predictions"}),
-    }, coords={"seam_distance": ("seam_distance", D, {"units": "mm", "long_name": "requested seam distance"}),
-               "prestrain_scan": ("prestrain_scan", grid, {"units": "1", "long_name": "stitch pre-strain eps0 (scan)"})})
-    res.attrs.update(calibration_target_mm=TARGET, calibration_target="paper simulation, d = 24 mm",
-                     calibration_distance_mm=d_cal,
-                     calibration_status=calib_status, status="; ".join(stat), model="yarn",
-                     description=profiles[0].attrs["description"], quick=int(quick),
-                     elements_per_segment=int(cell.resolution.get("elements_per_segment", 2)))
-    save_netcdf(res, out / "calibrate_seam.nc")
-
-    plt = pyplot()
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
-    for d, p in zip(D, profiles):
-        ax[0].plot(p.x, p.height, "o-", ms=3, label=f"d = {p.attrs['effective_seam_distance_mm']:.1f} mm, eps0 = {eps_used:.2f}")
-    ax[0].plot(p15.x, p15.height, "k--", label=f"d = {p15.attrs['effective_seam_distance_mm']:.1f} mm, eps0 = 0.15")
-    ax[0].axhline(20.0, color="gray", lw=0.8, label="flat fabric")
-    ax[0].set(xlabel="x across the seam (mm)", ylabel="height h(x) (mm)", title="yarn-level seam profiles")
-    ax[0].legend(fontsize=7)
-    ax[1].plot(grid, c, "o-", label="cushion height (max h)")
-    ax[1].plot(grid, scan_s, "s-", label="seam height h(0)")
-    ax[1].axhline(TARGET, color="r", ls=":", label="target 14.33 mm (paper, 24 mm)")
-    ax[1].set(xlabel="stitch pre-strain eps0", ylabel="mm", title=f"calibration scan, d = {d_cal:g} mm")
-    ax[1].legend(fontsize=7)
-    ax[2].plot(D, rows, "o-", label=f"yarn model (eps0 = {eps_used:.2f}{'' if np.isfinite(calibrated) else ', uncalibrated'})")
-    ax[2].plot(D, [float(p.cushion_height) for p in fnd], "d-.", label="foundation model (D calibrated on 24 mm)")
-    ax[2].plot(D, [paper.get(d, np.nan) for d in D], "s--", label="paper simulation")
-    ax[2].plot(D, [measured.get(d, np.nan) for d in D], "^:", label="measured")
-    ax[2].set(xlabel="seam distance (mm)", ylabel="cushion height (mm)")
-    ax[2].legend(fontsize=7)
-    fig.tight_layout()
-    save_figure(fig, out / "calibrate_seam.png")
-    return res
+    t0, c0 = time.perf_counter(), time.process_time()
+    s = sew(cell, seam_distance=d, prestrain=eps, steps=steps)
+    p = profile_dataset(s)
+    p.attrs.update(wall_seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0)
+    f = homtex.seam_profile(cell, seam_distance=d, method="foundation")
+    log.info("d = %g mm, eps0 %.4f: cushion %.3f mm (foundation %.2f), seam line %.2f mm, near-seam leg loss %.3f, "
+             "%s, %.0f s", d, eps, float(p.cushion_height), float(f.cushion_height), float(p.seam_height),
+             float(p.leg_loss_near_seam), p.attrs["status"], p.attrs["wall_seconds"])
+    return p, float(f.cushion_height)
 
 
 def main(argv=None):
+    import homtex
+    from homtex.seams import paper_setting
+    from homtex.seams.calibrate import calibrate_stitch
+
     ap = parser(__file__, __doc__)
-    ap.add_argument("--full", action="store_true", help="a finer eps0 scan")
-    a = ap.parse_args(argv)
-    out = setup(a)
-    res = run(out, full=a.full, quick=a.quick)
-    print(res)
-    print(f"wrote {out / 'calibrate_seam.nc'} and {out / 'calibrate_seam.png'}")
+    ap.add_argument("--prestrain", type=float, default=None, help="skip the calibration, use this eps0")
+    args = ap.parse_args(argv)
+    out = setup(args)
+    cell = homtex.load_cell("spacer_20mm")
+    D, d_cal, target, steps = [18.0, 24.0, 43.0], 24.0, MEASURED[24.0], 10
+    if args.quick:       # one small sewing at a small pre-strain (the calibration itself: tests/test_sewing.py)
+        D, d_cal, target, steps = [8.5], 8.5, 19.5, 2
+        args.prestrain = 0.15 if args.prestrain is None else args.prestrain
+    t0 = time.perf_counter()
+    if args.prestrain is None:
+        cal = calibrate_stitch(cell, seam_distance=d_cal, cushion_height=target, steps=steps,
+                               eps_max=0.5 if args.quick else 0.8)
+        eps = cal["prestrain"]
+        bracket = cal["bracket"]
+        hist = np.array(cal["history"])
+        log.info("calibrated eps0 = %.5f (cushion %.4f mm at d = %g mm, target %g; %.0f s)", eps,
+                 cal["cushion_height"], d_cal, target, cal["seconds"])
+    else:
+        eps = float(args.prestrain)
+        bracket = (np.zeros(0), np.zeros(0))
+        hist = np.zeros((0, 2))
+    t_cal = time.perf_counter() - t0
+    low = paper_setting(cell.replace(**{"parameters.seam.prestrain": eps}), 0.15)["prestrain"]
+    cases = [(d, eps, "calibrated") for d in D] + ([] if args.quick else [(D[-1], low, "low tension (paper's 15 %)")])
+    profs, found = [], []
+    for d, e, _ in cases:
+        p, f = sew_row(cell, d, e, steps)
+        profs.append(p)
+        found.append(f)
+    n = len(cases)
+    xs = max(p.sizes["x"] for p in profs)
+    X = np.full((n, xs), np.nan)
+    Hh = np.full((n, xs), np.nan)
+    legs = max(p.sizes["leg"] for p in profs)
+    LX = np.full((n, legs), np.nan)
+    LL = np.full((n, legs), np.nan)
+    for i, p in enumerate(profs):
+        X[i, :p.sizes["x"]] = p.x.values
+        Hh[i, :p.sizes["x"]] = p.height.values
+        LX[i, :p.sizes["leg"]] = p.leg_x.values
+        LL[i, :p.sizes["leg"]] = p.leg_loss.values
+
+    def var(name, units, long_name, f):
+        return (("case",), np.array([f(p) for p in profs], dtype=float), {"units": units, "long_name": long_name})
+
+    ds = xr.Dataset(
+        {"x_profile": (("case", "bin"), X, {"units": "mm", "long_name": "position across the seam (0 = seam line)"}),
+         "height": (("case", "bin"), Hh, {"units": "mm", "long_name": "cushion height per wale bin"}),
+         "leg_x": (("case", "leg"), LX, {"units": "mm", "long_name": "pile leg centre across the seam"}),
+         "leg_loss": (("case", "leg"), LL, {"units": "1", "long_name": "loss of end-to-end length of a pile leg"}),
+         "cushion_height": var("cushion_height", "mm", "cushion height (yarn level, engine)",
+                               lambda p: float(p.cushion_height)),
+         "seam_height": var("seam_height", "mm", "height at the seam line", lambda p: float(p.seam_height)),
+         "leg_loss_near_seam": var("x", "1", "largest leg-length loss within 3 mm of the seam",
+                                   lambda p: float(p.leg_loss_near_seam)),
+         "stitch_force": var("x", "N", "axial force of a stitch leg", lambda p: float(p.stitch_force)),
+         "thread_per_stitch": var("x", "mm", "thread per stitch in the sewn state",
+                                  lambda p: float(p.thread_per_stitch)),
+         "stitch_fabric_contacts": var("x", "1", "stitch-fabric contacts", lambda p: p.attrs["stitch_fabric_contacts"]),
+         "buckled_legs": var("x", "1", "pile legs shortened by more than 5 %", lambda p: p.attrs["buckled_legs"]),
+         "branch_switches": var("x", "1", "perturbations along a critical mode",
+                                lambda p: len(np.atleast_1d(p.attrs["branch_switches"])) // 2),
+         "energy_balance": var("x", "1", "energy balance of the ramp", lambda p: p.attrs["energy_balance"]),
+         "wall_seconds": var("x", "s", "wall time of the sewing", lambda p: p.attrs["wall_seconds"]),
+         "cpu_seconds": var("x", "s", "process CPU time of the sewing", lambda p: p.attrs["cpu_seconds"]),
+         "effective_seam_distance": var("x", "mm", "effective seam distance (whole fabric repeats)",
+                                        lambda p: p.attrs["effective_seam_distance_mm"]),
+         "prestrain": (("case",), np.array([c[1] for c in cases]), {"units": "1", "long_name": "stitch pre-strain"}),
+         "foundation_cushion": (("case",), np.array(found), {"units": "mm", "long_name": "foundation model's cushion"}),
+         "status": (("case",), np.array([p.attrs["status"] for p in profs]), {"units": "1", "long_name": "status"}),
+         "label": (("case",), np.array([c[2] for c in cases]), {"units": "1", "long_name": "stitch setting"}),
+         "bracket_prestrain": (("ramp",), np.asarray(bracket[0], dtype=float),
+                               {"units": "1", "long_name": "eps0 along the calibration's bracket ramp"}),
+         "bracket_cushion": (("ramp",), np.asarray(bracket[1], dtype=float),
+                             {"units": "mm", "long_name": "cushion height along the bracket ramp (d = 24 mm)"}),
+         "check_prestrain": (("check",), hist[:, 0] if len(hist) else np.zeros(0),
+                             {"units": "1", "long_name": "eps0 of each checking sewing"}),
+         "check_cushion": (("check",), hist[:, 1] if len(hist) else np.zeros(0),
+                           {"units": "mm", "long_name": "cushion of each checking sewing"})},
+        coords={"case": ("case", np.arange(n), {"units": "1", "long_name": "case"}),
+                "seam_distance": ("case", np.array([c[0] for c in cases]), {"units": "mm",
+                                                                            "long_name": "requested seam distance"})})
+    ds.attrs.update(calibrated_prestrain=eps, calibration_distance_mm=d_cal, calibration_target_mm=target,
+                    calibration_seconds=t_cal, low_tension_prestrain=low, ramp_steps=steps,
+                    friction=str(cell.contact), cell="spacer_20mm")
+    save_netcdf(ds, out / "calibrate_seam.nc")
+
+    plt = pyplot()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.6))
+    for i, (d, e, lab) in enumerate(cases):
+        a1.plot(X[i], Hh[i], "o-" if lab == "calibrated" else "s--", ms=3,
+                label=f"d = {ds.effective_seam_distance.values[i]:.1f} mm, {lab} (eps0 {e:.3f})")
+    a1.axhline(20.0, color="0.6", lw=0.8, ls=":", label="unseamed thickness")
+    a1.set(xlabel="position across the seam, mm (0 = seam line)", ylabel="fabric height, mm",
+           title="sewn cushion profiles (yarn level, large-motion engine)")
+    a1.legend(fontsize=7)
+    cal = [i for i, c in enumerate(cases) if c[2] == "calibrated"]
+    dd = np.array([cases[i][0] for i in cal])
+    a2.plot(dd, ds.cushion_height.values[cal], "o-", label=f"yarn level, engine (calibrated on {d_cal:g} mm only)")
+    a2.plot(dd, ds.foundation_cushion.values[cal], "^--", label="foundation model (calibrated on 24 mm)")
+    if not args.quick:
+        md = sorted(MEASURED)
+        a2.plot(md, [MEASURED[k] for k in md], "ks", label="measured (paper, Table 1)")
+        a2.errorbar([18.0], [10.0], yerr=[[2.0], [2.0]], fmt="none", ecolor="k", capsize=4,
+                    label="18 mm: 8-12 mm (paper's text)")
+        a2.plot(sorted(PAPER), [PAPER[k] for k in sorted(PAPER)], "x", color="tab:red", ms=8,
+                label="paper's simulation")
+    il = len(cases) - 1
+    a2.plot([cases[il][0]], [ds.cushion_height.values[il]], "v", color="tab:purple",
+            label=f"low tension (eps0 {low:.3f}), yarn level")
+    a2.set(xlabel="seam distance, mm", ylabel="cushion height, mm", title="cushion height against seam distance")
+    a2.legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, out / "calibrate_seam.png")
+    return ds
 
 
 if __name__ == "__main__":

@@ -45,10 +45,10 @@ def run(out: Path, *, full: bool = False, quick: bool = False) -> xr.Dataset:
         strain, steps = 0.03, 1
 
     t0 = time.perf_counter()
-    seamed = seam_compression(cell, seam_distance=24.0, strain=strain, steps=steps)
+    seamed = seam_compression(cell, seam_distance=24.0, strain=strain, steps=steps, prestrain=0.3, geometry="linear")
     t_seam = time.perf_counter() - t0
     t0 = time.perf_counter()
-    plain = seam_compression(cell, seam_distance=None, strain=strain, steps=steps)
+    plain = seam_compression(cell, seam_distance=None, strain=strain, steps=steps, geometry="linear")
     t_plain = time.perf_counter() - t0
     print(f"seamed d = {seamed.attrs['seam_distance_mm']:.2f} mm: {status_text(seamed)[:100]} ({t_seam:.1f} s)")
     print(f"unseamed: {status_text(plain)[:100]} ({t_plain:.1f} s)")

@@ -58,7 +58,8 @@ def run(out: Path, *, points=POINTS, d: float = D, resolution: int | None = None
     for span, f, eps in points:
         t0 = time.perf_counter()
         try:
-            p = homtex.seam_profile(variant(base, span, f), seam_distance=d, prestrain=eps, steps=steps)
+            p = homtex.seam_profile(variant(base, span, f), seam_distance=d, prestrain=eps, steps=steps,
+                                    geometry="linear")
             status = str(p.attrs["status"])
             if status != "ok":
                 status = f"{status}: {p.attrs.get('status_detail', '')}"

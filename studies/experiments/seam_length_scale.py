@@ -83,7 +83,7 @@ def run(out: Path, *, distances=DISTANCES, resolution: int | None = None, steps:
     lam_yarnsum = (4 * D_yarn / k) ** 0.25
     ds_list, rows = [], []
     for d in distances:
-        p = homtex.seam_profile(cell, seam_distance=d, steps=steps)
+        p = homtex.seam_profile(cell, seam_distance=d, steps=steps, prestrain=0.3, geometry="linear")
         x, h = p.x.values, p.height.values
         de = float(p.seam_distance)
         lam, amp, crest, rms = fit_lambda(x, h, de)

@@ -10,10 +10,10 @@ curve: stress, yarn-yarn contacts, the energy split (bending, axial, torsion, sh
 friction dissipated, stabilisation absorbed, external work and the energy balance, the first
 buckling strain (the most compressed pile element loses half of its initial axial stiffness),
 the run time. Below the first buckling strain the curves are compared with the linear model
-(``geometry="linear"``), with a stiff, thin barrier (ghat 0.1 um, kappa 1e5 N/mm) to separate
-the barrier's compliance from the geometric softening, and with the former co-rotational contact
-solve (``homtex.contact.newton.newton_contact``: linearised contact, no friction) as an
-independent geometrically nonlinear reference. Pictures of the cell at 0 / 30 / 50 / 70 %
+(``geometry="linear"``) and with a stiff, thin barrier (ghat 0.1 um, kappa 1e5 N/mm) to separate
+the barrier's compliance from the geometric softening. (The former co-rotational contact solve,
+linearised contact without friction, was a third curve there; it was retired: the large-motion
+engine is the package's one geometrically nonlinear contact solver.) Pictures of the cell at 0 / 30 / 50 / 70 %
 (friction 0.2; 3D views like the paper's Fig. 10) and VTK files of the same states.
 
 Usage::
@@ -74,27 +74,6 @@ def curve(cell, levels, mu, *, positions=False, contact=None):
     return ds
 
 
-def former_engine(cell, levels):
-    """Stress of the former co-rotational contact solve (linearised contact) at ``levels``."""
-    from homtex.analysis.corotational import Corotational
-    from homtex.contact.newton import newton_contact
-
-    test = CompressionTest.build(cell.frame, info=cell.info, groups=cell.groups)
-    cs = test.solver(homtex.Contact(), solver="direct", tol=1e-10)
-    cor = Corotational(cell.frame, cs.assembler)
-    out, pu, warm = [], None, None
-    for e in levels:
-        cs.set_plate(1, displacement=-e * test.H0)
-        try:
-            res, pu, _ = newton_contact(cs, cor, plate_u=pu, warm_keys=warm)
-        except homtex.SolverError as err:
-            log.info("former engine stops at %.4f: %s", e, err)
-            break
-        warm = res.extra["active_keys"]
-        out.append(float(res.extra["plate_force"][1]) / test.area * 1e3)
-    return np.r_[out, np.full(len(levels) - len(out), np.nan)]
-
-
 def step_convergence(coarse, fine):
     """Largest |stress difference| / the larger stress at the coarse levels both reached."""
     f = fine.sel(strain=coarse.strain.values, method="nearest", tolerance=1e-9)
@@ -113,14 +92,13 @@ def run(out: Path, quick: bool):
         curves[mu] = ds
         seconds[mu] = ds.attrs["seconds"]
         conv[mu] = step_convergence(ds, curve(cell, refined(levels), mu)) if not quick else np.nan
-    lin = homtex.compress(cell, strain=levels)
+    lin = homtex.compress(cell, strain=levels, geometry="linear")
     small = levels[levels <= 0.01]
     stiff = curve(cell, small, 0.0, contact=homtex.Contact(barrier_stiffness=1e5, barrier_gap=1e-3))
-    former = former_engine(cell, small)
-    return cell, levels, curves, conv, seconds, lin, small, stiff, former
+    return cell, levels, curves, conv, seconds, lin, small, stiff
 
 
-def summary_dataset(levels, curves, conv, seconds, lin, small, stiff, former) -> xr.Dataset:
+def summary_dataset(levels, curves, conv, seconds, lin, small, stiff) -> xr.Dataset:
     mus = list(curves)
     n = len(levels)
 
@@ -136,8 +114,6 @@ def summary_dataset(levels, curves, conv, seconds, lin, small, stiff, former) ->
     k = len(small)
     data["stiff_barrier_stress"] = ("small_strain", stiff.stress.values[:k],
                                     {"units": "kPa", "long_name": "frictionless, barrier kappa 1e5 N/mm, ghat 0.1 um"})
-    data["former_engine_stress"] = ("small_strain", former,
-                                    {"units": "kPa", "long_name": "former co-rotational contact solve (linearised contact)"})
     fb = [c.attrs["first_buckling_strain"] for c in curves.values()]
     data["first_buckling_strain"] = ("friction", fb, {"units": "1", "long_name": "first buckling strain of a pile leg"})
     data["step_convergence"] = ("friction", [conv[m] for m in mus],
@@ -174,8 +150,7 @@ def plot_curves(ds, out):
     c0 = ds.sel(friction=0.0)
     lin_small = ds.linear_stress.sel(strain=ds.small_strain.values).values
     for y, lab in ((c0.stress.sel(strain=ds.small_strain.values).values, "engine, default barrier"),
-                   (ds.stiff_barrier_stress.values, "engine, stiff thin barrier"),
-                   (ds.former_engine_stress.values, "former co-rotational solve")):
+                   (ds.stiff_barrier_stress.values, "engine, stiff thin barrier")):
         ax[0, 2].plot(s, 100 * (y / lin_small - 1), "o-", ms=3, label=lab)
     ax[0, 2].axvline(100 * float(c0.first_buckling_strain), color="k", ls=":", lw=1, label="first buckling")
     ax[0, 2].set(xlabel="compression (%)", ylabel="stress / linear model - 1 (%)", title="against the linear model, "
@@ -273,9 +248,7 @@ def report(ds, lin):
     below = ds.small_strain.values < fb
     lines.append(f"against the linear model below first buckling ({100 * fb:.2f} %), friction 0: "
                  f"{100 * rel[0]:+.2f} % at {100 * ds.small_strain.values[0]:.3f} %, {100 * rel[below][-1]:+.2f} % at "
-                 f"{100 * ds.small_strain.values[below][-1]:.2f} %; former co-rotational solve "
-                 f"{100 * (ds.former_engine_stress.values[0] / lin_small[0] - 1):+.2f} % / "
-                 f"{100 * (ds.former_engine_stress.values[below][-1] / lin_small[below][-1] - 1):+.2f} %; stiff thin "
+                 f"{100 * ds.small_strain.values[below][-1]:.2f} %; stiff thin "
                  f"barrier {100 * (ds.stiff_barrier_stress.values[0] / lin_small[0] - 1):+.2f} % / "
                  f"{100 * (ds.stiff_barrier_stress.values[below][-1] / lin_small[below][-1] - 1):+.2f} %; "
                  f"linear model: {lin.attrs['status']} {lin.attrs.get('status_detail', '')[:90]}")
@@ -287,8 +260,8 @@ def main(argv=None) -> None:
     p.add_argument("--no-docs", action="store_true", help="do not copy the charts to docs/studies")
     a = p.parse_args(argv)
     out = setup(a)
-    cell, levels, curves, conv, seconds, lin, small, stiff, former = run(out, a.quick)
-    ds = summary_dataset(levels, curves, conv, seconds, lin, small, stiff, former)
+    cell, levels, curves, conv, seconds, lin, small, stiff = run(out, a.quick)
+    ds = summary_dataset(levels, curves, conv, seconds, lin, small, stiff)
     save_netcdf(ds, out / "spacer_nonlinear_compression.nc")
     states = curves[0.2][["x", "plate_z", "element_energy", "stress"]]
     states.attrs.update({k: v for k, v in curves[0.2].attrs.items() if isinstance(v, (int, float, str))})

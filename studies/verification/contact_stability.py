@@ -177,14 +177,14 @@ def run(out: Path, full: bool = False, quick: bool = False):
     steps = np.array([1, 2] if quick else [1, 2, 5, 10, 20, 40])
     ref_steps, final = (4, 0.1) if quick else (80, 0.3)
     strats = ("pdas", "removal")
-    ref_ds = homtex.compress(cell, strain=final, steps=ref_steps)
+    ref_ds = homtex.compress(cell, strain=final, steps=ref_steps, geometry="linear")
     F_ref = float(ref_ds.force[-1]) if ref_ds.attrs["status"] == "ok" else np.nan
     scode = np.zeros((len(steps), len(strats)), dtype=np.int64)
     serr = np.full(scode.shape, np.nan)
     sdone = np.zeros(scode.shape)
     for i, ns in enumerate(steps):
         for j, st in enumerate(strats):
-            ds = homtex.compress(cell, strain=final, steps=int(ns), contact=Contact(strategy=st))
+            ds = homtex.compress(cell, strain=final, steps=int(ns), contact=Contact(strategy=st), geometry="linear")
             status = ds.attrs["status"]
             sdone[i, j] = ds.sizes["strain"] / ns
             if status == "ok":

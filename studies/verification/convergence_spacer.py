@@ -31,7 +31,7 @@ from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E40
 def modulus(cell, contact=None, strain=0.2, steps=8):
     import homtex
 
-    ds = homtex.compress(cell, strain=strain, steps=steps, contact=contact)
+    ds = homtex.compress(cell, strain=strain, steps=steps, contact=contact, geometry="linear")
     if ds.attrs["status"] != "ok":
         return np.nan
     e, s = ds.strain.values, ds.stress.values
@@ -64,7 +64,7 @@ def main(argv=None):
     cush, seam = [], []
     for n in seam_res:
         p = homtex.seam_profile(base.replace(**{"resolution.elements_per_segment": n}), seam_distance=24.0,
-                                steps=seam_steps)
+                                steps=seam_steps, prestrain=0.3, geometry="linear")
         cush.append(float(p.cushion_height) if p.attrs.get("status", "ok") == "ok" else np.nan)
         seam.append(float(p.seam_height) if p.attrs.get("status", "ok") == "ok" else np.nan)
     exact = modulus(base, **mod_kw)
@@ -74,7 +74,7 @@ def main(argv=None):
     cush_p, seam_p = [], []
     for f in pen_factors:
         try:
-            p = homtex.seam_profile(base, seam_distance=24.0, steps=seam_steps,
+            p = homtex.seam_profile(base, seam_distance=24.0, steps=seam_steps, prestrain=0.3, geometry="linear",
                                     contact=homtex.Contact(enforcement="penalty", penalty=f * k0))
             okp = p.attrs.get("status", "ok") == "ok"
         except homtex.SolverError as err:   # a too-soft penalty is detected and named
