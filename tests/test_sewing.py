@@ -243,3 +243,41 @@ def test_calibrate_stitch_finds_the_prestrain_of_a_target_cushion(sewn, cell):
     with pytest.raises(InputError, match="raise eps_max"):
         calibrate_stitch(cell, seam_distance=D_SMALL, cushion_height=5.0, eps_max=0.05, steps=1,
                          contact=homtex.Contact(friction=0.0))
+
+
+def test_a_tension_only_thread_pulls_when_stretched_and_not_when_shortened(cell):
+    """Force k (l - L) / L along a stretched element, none along a shorter one; the gradient and
+    Hessian are the derivatives of the potential (central differences)."""
+    from homtex.contact.tension import TensionOnly
+
+    fr, info = seam_cell(cell, seam_distance=D_SMALL, prestrain=0.0)
+    el = np.arange(int(info["fabric_elements"]), fr.n_elements)
+    v = fr.nodes[fr.elements[el, 1]] + fr.shift[el] - fr.nodes[fr.elements[el, 0]]
+    L0 = np.linalg.norm(v, axis=1)
+    free = L0 * np.where(np.arange(len(el)) % 2 == 0, 0.95, 1.05)     # every other element slack
+    term = TensionOnly(fr, el, 100.0, free)
+    f = term.forces(fr.nodes)
+    np.testing.assert_allclose(f[::2], 100.0 * (L0[::2] - free[::2]) / free[::2], rtol=1e-12)
+    assert np.all(f[1::2] == 0.0)
+    rng = np.random.default_rng(2)
+    x = fr.nodes + 1e-3 * rng.standard_normal(fr.nodes.shape)
+    e, g, nodes, H = term.evaluate(x, 1.0, True)
+    h = 1e-6
+    for k in rng.choice(np.unique(nodes), 3, replace=False):
+        for c in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[k, c] += h
+            xm[k, c] -= h
+            ep, gp, _, _ = term.evaluate(xp, 1.0, False)
+            em, gm, _, _ = term.evaluate(xm, 1.0, False)
+            assert (ep - em) / (2 * h) == pytest.approx(g[k, c], rel=1e-5, abs=1e-7)
+            col = np.zeros_like(x)
+            for r, (a, b) in enumerate(nodes):
+                for j, node in enumerate((a, b)):
+                    if node == k:
+                        blk = H[r][:, 3 * j + c].reshape(2, 3)
+                        col[a] += blk[0]
+                        col[b] += blk[1]
+            np.testing.assert_allclose((gp - gm) / (2 * h), col, atol=1e-4)
+    with pytest.raises(InputError, match="TensionOnly"):
+        TensionOnly(fr, el, 100.0, 0.0)

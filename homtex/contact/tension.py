@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["ConstantTension"]
+__all__ = ["ConstantTension", "TensionOnly"]
 
 
 class ConstantTension:
@@ -87,3 +87,60 @@ class ConstantTension:
         :class:`~homtex.analysis.corotational.Corotational` state by ``factor`` (their bending and
         torsion stay): the tension then comes from this term, not from their stretch."""
         cor.arrays[0][self.elements] *= float(factor)
+
+
+class TensionOnly:
+    """Elements that pull like an elastic thread and go slack when shorter than their free length
+    (a sewn thread under the punch: it cannot push).
+
+    V = sum_e k_e / (2 L_e) max(l_e - L_e, 0)^2 with k_e = EA (N) and L_e the free length (mm); the
+    force k_e (l_e - L_e) / L_e acts along the element while it is longer than L_e, none when it is
+    shorter. The Hessian of a stretched element, t/l (I - e e^T) + k/L e e^T on [[A, -A], [-A, A]],
+    is positive semi-definite; a slack one adds nothing. Not ramped: ``scale`` is ignored and
+    :meth:`rate` is 0. The elements' own axial stiffness is to be softened
+    (:meth:`ConstantTension.soften`, the same method) so that the axial force is this term's.
+    """
+
+    def __init__(self, frame, elements, stiffness, free_length):
+        el = np.asarray(elements, dtype=np.int64).reshape(-1)
+        if el.size and (el.min() < 0 or el.max() >= frame.n_elements):
+            raise InputError(f"TensionOnly: element indices must lie in 0..{frame.n_elements - 1}")
+        k = np.broadcast_to(np.asarray(stiffness, dtype=float), el.shape).copy()
+        L = np.broadcast_to(np.asarray(free_length, dtype=float), el.shape).copy()
+        if not (np.all(np.isfinite(k)) and np.all(k > 0) and np.all(np.isfinite(L)) and np.all(L > 0)):
+            raise InputError("TensionOnly: stiffness (N) and free length (mm) must be finite and > 0")
+        self.elements, self.k, self.L = el, k, L
+        self.nodes = np.ascontiguousarray(frame.elements[el])
+        self.shift = np.ascontiguousarray(frame.shift[el])
+
+    lengths = ConstantTension.lengths
+    soften = ConstantTension.soften
+
+    def rate(self, x: np.ndarray) -> float:
+        return 0.0
+
+    def forces(self, x: np.ndarray) -> np.ndarray:
+        """(k,) axial force of each element at positions x, N (0 when slack)."""
+        return self.k * np.maximum(self.lengths(x) - self.L, 0.0) / self.L
+
+    def evaluate(self, x: np.ndarray, scale: float, hessian: bool):
+        """(energy N mm, gradient (n, 3) N, stencil nodes (k, 2), blocks (k, 6, 6) N/mm or None)."""
+        d = x[self.nodes[:, 1]] + self.shift - x[self.nodes[:, 0]]
+        ln = np.sqrt(np.einsum("ij,ij->i", d, d))
+        e = d / ln[:, None]
+        s = np.maximum(ln - self.L, 0.0)
+        t = self.k * s / self.L
+        g = np.zeros((len(x), 3))
+        f = t[:, None] * e
+        np.add.at(g, self.nodes[:, 1], f)
+        np.add.at(g, self.nodes[:, 0], -f)
+        H = None
+        if hessian:
+            ee = e[:, :, None] * e[:, None, :]
+            A = (t / ln)[:, None, None] * (np.eye(3)[None] - ee) + ((s > 0) * self.k / self.L)[:, None, None] * ee
+            H = np.empty((len(ln), 6, 6))
+            H[:, :3, :3] = A
+            H[:, 3:, 3:] = A
+            H[:, :3, 3:] = -A
+            H[:, 3:, :3] = -A
+        return float(0.5 * np.sum(self.k * s * s / self.L)), g, self.nodes, H

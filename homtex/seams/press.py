@@ -2,7 +2,9 @@
 
 The cell starts in its sewn state (:class:`~homtex.seams.sew.SewnSeam`): the thread is locked at
 its sewn length (no more thread is fed once the seam is sewn: a tension-controlled stitch keeps
-the tension it was sewn with until the punch slackens it), two rigid plates are added to the
+the tension it was sewn with until the punch slackens it) and cannot push (``slack_thread``: its
+axial stiffness becomes a tension-only term, :func:`slack_stitch`; a leg the punch shortens goes
+slack instead of buckling as a strut), two rigid plates are added to the
 state, the bottom one under the lowest yarn surface and the top one at the UNSEAMED thickness
 H0 above it (as the paper's curves and the macro layer start: one strain is one plate position,
 strain = plate travel / H0), and the top plate descends through the given strain levels with the
@@ -23,11 +25,12 @@ from ..analysis.energy import LEDGER_META, ledger_check
 from ..analysis.stepping import flag_force_drops
 from ..contact.engine import EngineStepper
 from ..contact.incremental import IncrementalSolver, NonlinearSettings
+from ..contact.tension import TensionOnly
 from ..errors import SolverError
 from ..model.results import Status, set_status
 from ..model.scene import Plate
 from ..output.datasets import curve_dataset
-from .sew import SEW_ITERATIONS, SewnSeam, seam_supports
+from .sew import SEW_ITERATIONS, SOFT_AXIAL, SewnSeam, seam_supports
 
 __all__ = ["press_sewn"]
 
@@ -49,7 +52,25 @@ _META = {
 _STRAIN = ("1", "compression strain: plate travel / unseamed thickness")
 
 
-def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, refine: float = 0.01) -> xr.Dataset:
+def slack_stitch(sol: IncrementalSolver, frame, info) -> TensionOnly:
+    """Make the stitch of a sewn state a thread that cannot push: its elements' axial stiffness is
+    handed to a :class:`~homtex.contact.tension.TensionOnly` term whose free lengths keep every
+    element's present tension (an element in compression, or without force, gets its present
+    length); their bending and torsion stay. Returns the term (added to ``sol``)."""
+    m0 = int(info["fabric_elements"])
+    el = np.arange(m0, frame.n_elements)
+    x = sol.positions
+    N = np.maximum(np.asarray(sol.cor.forces[el, 6], dtype=float), 0.0)
+    EA = np.asarray(frame.EA, dtype=float)[el]
+    v = x[frame.elements[el, 1]] + frame.shift[el] - x[frame.elements[el, 0]]
+    term = TensionOnly(frame, el, EA, np.linalg.norm(v, axis=1) / (1.0 + N / EA))
+    term.soften(sol.cor, SOFT_AXIAL)
+    sol.add_term(term)
+    return term
+
+
+def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, refine: float = 0.01,
+               slack_thread: bool = True) -> xr.Dataset:
     """Press ``sewn`` between rigid plates through the strain ``levels`` (plate travel / ``thickness``
     H0, increasing, < 1; see the module docstring).
 
@@ -79,6 +100,8 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
     sol = IncrementalSolver(frame, fixed, None, plates, sewn.contact, friction_spec=sewn.friction_spec,
                             settings=NonlinearSettings(max_iter=SEW_ITERATIONS))
     sol.restart_at(ut, Q)
+    if slack_thread:
+        thread = slack_stitch(sol, frame, info)
     z_ref = z_lo + H0 + ghat            # the plate position of zero strain
 
     def solve(level):
@@ -95,7 +118,16 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
     # until the top plate meets the specimen nothing loads it (no force, the state unchanged); a
     # solve there would face the specimen floating between the plates (held in z by nothing)
     free_until = max(0.0, H0 - (z_hi - z_lo)) / H0
-    legs_N = float(np.mean(sol.cor.forces[legs, 6])) if legs.any() else 0.0
+    def leg_force() -> float:
+        """Mean axial force of the legs (the thread term's where the stitch is slack-capable), N."""
+        if not legs.any():
+            return 0.0
+        N = np.asarray(sol.cor.forces[:, 6], dtype=float).copy()
+        if slack_thread:
+            N[thread.elements] += thread.forces(sol.positions)
+        return float(np.mean(N[legs]))
+
+    legs_N = leg_force()
     yy = sewn.path.get("yarn_yarn_contacts")
     sewn_pairs = float(yy.values[-1]) if yy is not None and yy.size else np.nan
     for k, lv in enumerate(np.asarray(levels, dtype=float)):
@@ -131,7 +163,7 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
                 "cushion_plate_contacts": len(fab),
                 "cushions_touched": len(np.unique(np.mod(np.round(xr_ / w).astype(np.int64), nb))),
                 "stitch_plate_contacts": int((pn >= nf).sum()), "active_yarn_yarn": ev["pairs"].n_active,
-                "leg_tension": float(np.mean(sol.cor.forces[legs, 6])), "substeps": tot["substeps"],
+                "leg_tension": leg_force(), "substeps": tot["substeps"],
                 "external_work": L["external_work"], "strain_energy": L["strain_energy"],
                 "contact_energy": L["contact_energy"], "friction_energy": L["dissipation"],
                 "stabilization_energy": L["stabilization"], "energy_balance": sol.balance()}
