@@ -185,9 +185,10 @@ def unseamed_stage(cell, out: Path, *, strain=0.5, steps=25, progress=False, nam
         raise InputError(f"unseamed compression of {cell.name} failed at once: {curve.attrs['status']}")
     summ = compression_summary(curve)
     curve.attrs.update({f"cell_{k}": v for k, v in cell.attrs().items()})
-    # the linear model holds to about 30 %; the large-motion engine has no such bound
+    # the linear model holds to its measured limit (the cell file's [validity]); the engine has no such bound
+    lim = float((getattr(cell, "validity", None) or {}).get("linear_strain_limit", 0.30))
     curve.attrs.update(title=f"{cell.name}: {what} compression between rigid plates", seconds=sec,
-                       modulus_kPa=summ["modulus_kPa"], validity_strain=0.30 if geometry == "linear" else 1.0)
+                       modulus_kPa=summ["modulus_kPa"], validity_strain=lim if geometry == "linear" else 1.0)
     describe(curve, "compression", cell)
     nc = _save(_attrs(curve), out / f"{name}.nc")
     png = save(compression_chart(curve), out / f"{name}.png")
@@ -276,7 +277,9 @@ def _cushion_dataset(cell, profiles, secs, keys) -> xr.Dataset:
         "case": [f"d={k[0]:g}" + ("" if k[1] is None else f", eps0={k[1]:g}") for k in keys],
         "xi": ("xi", xi, {"units": "1", "long_name": "position across the seam / effective seam distance "
                           "(0: the seam line, +-0.5: midway between seams)"})})
-    ds.attrs.update(yarn_model=str(profiles["yarn"][keys[0]].attrs.get("model", "yarn-level seam cell")),
+    y0 = profiles["yarn"][keys[0]]
+    ds.attrs.update(yarn_model=str(y0.attrs.get("model", "yarn-level seam cell")),
+                    yarn_geometry=str(y0.attrs.get("geometry", "linear")),
                     foundation_model=str(profiles["foundation"][keys[0]].attrs.get("description", "")))
     return describe(ds, "cushions", cell, coords={"case": ("1", "seam distance asked for, mm, and pre-strain")})
 
@@ -362,7 +365,8 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
     err_pre = float(np.abs(s_mi[pre] - s_y[pre]).max() / max(np.abs(s_y[pre]).max(), 1e-300)) if pre.any() \
         else float("nan")
     ds = xr.Dataset(
-        {"stress_yarn": ("plate_displacement", s_y, {"units": "kPa", "long_name": "yarn-level seam cell"}),
+        {"stress_yarn": ("plate_displacement", s_y, {"units": "kPa", "long_name":
+                                                       f"linear yarn-level seam cell (eps0 {LINEAR_PRESTRAIN:g})"}),
          "stress_macro": ("plate_displacement", s_mi, {"units": "kPa", "long_name": "macro cushion layer"}),
          "stress_macro_held": ("plate_displacement", s_law["held"],
                                {"units": "kPa", "long_name": "macro cushion layer, pre-load held by the thread"}),
@@ -390,7 +394,8 @@ def seamed_stage(cell, curve, profiles, out: Path, *, seam_distance=24.0, strain
         ds[f"{key}_curve"] = ("travel", m.stress.values, {**ds[key].attrs, "units": "kPa"})
     ds["stress_unseamed_curve"] = ("travel", np.interp(tr / H0, np.r_[0.0, curve.strain.values],
                                                        np.r_[0.0, curve.stress.values]),
-                                   {"units": "kPa", "long_name": "unseamed fabric (yarn level)"})
+                                   {"units": "kPa", "long_name": "unseamed fabric (yarn level, "
+                                                f"{curve.attrs.get('geometry', 'linear')} model)"})
     describe(ds, "seamed_vs_macro", cell)
     nc = _save(_attrs(ds, title=f"seamed d = {d:g} mm: yarn level vs macro layer"), out / "seamed_yarn_vs_macro.nc")
     png = save(seamed_chart(ds), out / "seamed_yarn_vs_macro.png")
@@ -424,12 +429,12 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
         log.info("  speed-accuracy: unseamed curve at %d element(s) per segment", n)
         c = cell.replace(**{"resolution.elements_per_segment": n})
         ds, sec = _timed(compress, c, strain=0.2, steps=4, geometry="linear")
-        rows.append(("A unseamed to 20 %", f"yarn, {n} el/seg", sec, _curve_error(rx, ry, ds.strain.values,
+        rows.append(("A unseamed to 20 %", f"linear yarn, {n} el/seg", sec, _curve_error(rx, ry, ds.strain.values,
                                                                                    ds.stress.values, 0.2)))
     for gtol in (1e-2, 1e-4):
         log.info("  speed-accuracy: unseamed curve with contact gap tolerance %g mm", gtol)
         ds, sec = _timed(compress, cell, strain=0.2, steps=4, contact=Contact(gap_tol=gtol), geometry="linear")
-        rows.append(("A unseamed to 20 %", f"yarn, gap tol {gtol:g} mm", sec,
+        rows.append(("A unseamed to 20 %", f"linear yarn, gap tol {gtol:g} mm", sec,
                      _curve_error(rx, ry, ds.strain.values, ds.stress.values, 0.2)))
 
     lk, sec_fit = _timed(Lookup.from_dataset, curve, "stress")
@@ -443,7 +448,7 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
     bx = seamed_ref.plate_displacement.values / H0
     by = seamed_ref.stress_yarn.values
     label_b = f"B seamed d={d:g} to 30 %"
-    rows.append((label_b, f"yarn seam cell, {int(seamed_ref.attrs['yarn_steps'])} steps (reference)",
+    rows.append((label_b, f"linear yarn seam cell, {int(seamed_ref.attrs['yarn_steps'])} steps (reference)",
                  float(seamed_ref.attrs["yarn_seconds"]),
                  0.0))
     for steps in seamed_steps:
@@ -451,7 +456,7 @@ def speed_accuracy_stage(cell, curve, profiles, seamed_ref, out: Path, *, quick=
             ds, sec = _timed(seam_compression, cell, seam_distance=d, strain=0.3, steps=steps, geometry="linear",
                              prestrain=LINEAR_PRESTRAIN)
         w = ds.plate_displacement.values - (float(ds.attrs["thickness_mm"]) - H0)
-        rows.append((label_b, f"yarn seam cell, {steps} steps", sec,
+        rows.append((label_b, f"linear yarn seam cell, {steps} steps", sec,
                      _curve_error(bx, by, w[w >= 0] / H0, ds.stress.values[w >= 0], 0.3)))
     prof = profiles[(d, None)]
     ds, sec = _timed(macro_curve, cell, seam_distance=d, curve=curve, profile=prof, strain=0.3,

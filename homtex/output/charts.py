@@ -267,8 +267,9 @@ def cushions_chart(ds):
     ax = fig.add_subplot(gs[:, 2])
     _cushion_heights(ax, ds, methods, H0)
     ax.set_title(f"{cell}: cushion height against seam distance", fontsize=9)
-    fig.suptitle(f"{cell}: cushion profiles, seam cell sewn on the large-motion engine (yarn) and foundation model",
-                 fontsize=10)
+    yarn = ("seam cell sewn on the large-motion engine" if ds.attrs.get("yarn_geometry", "linear") == "nonlinear"
+            else "geometrically linear seam cell")
+    fig.suptitle(f"{cell}: cushion profiles, {yarn} (yarn) and foundation model", fontsize=10)
     fig.tight_layout()
     return fig
 
@@ -282,9 +283,11 @@ def _cushion_heights(ax, ds, methods, H0):
             continue
         h = ds[f"cushion_height_{m}"].values
         e = eps.get(m, np.full(len(d), np.nan))
-        name = "sewn on the engine" if m == "yarn" else "foundation model"
+        engine = ds.attrs.get("yarn_geometry", "linear") == "nonlinear"
+        name = ("sewn on the engine" if engine else "linear seam cell") if m == "yarn" else "foundation model"
+        how = "calibrated on 24 mm" if m == "foundation" or engine else "nominal"
         _tag(ax, "mm", None, ax.plot(d[nominal], h[nominal], mk + "-", color=c, label=f"{name} (eps0 = "
-                                     f"{e[nominal][0]:.3g}, calibrated on 24 mm)" if nominal.any() else name))
+                                     f"{e[nominal][0]:.3g}, {how})" if nominal.any() else name))
         if (~nominal).any():
             _tag(ax, "mm", None, ax.plot(d[~nominal], h[~nominal], mk, mfc="none", color=c,
                                          label=f"{name}, low setting, eps0 = {e[~nominal][0]:.3g}"))
@@ -357,7 +360,8 @@ def seamed_chart(ds):
     H0 = _thickness(ds)
     kpa = _units(ds, "stress_yarn", "kPa")
     _tag(ax[0], kpa, "compressive stress", ax[0].plot(w, ds.stress_yarn.values, "o-", ms=3, color="tab:blue",
-                                                      label="yarn-level seam cell (reference)"))
+                                                      label=ds.stress_yarn.attrs.get("long_name", "yarn-level "
+                                                                                     "seam cell") + " (reference)"))
     fine = "travel" in ds.dims
     for name, ls, lab in (("stress_macro", "-", "macro layer, pre-load handed over by the thread"),
                           ("stress_macro_held", "--", "macro, pre-load held"),
@@ -367,6 +371,8 @@ def seamed_chart(ds):
         if key not in ds:
             continue
         xx = ds.travel.values if "travel" in ds[key].dims else w
+        if name == "stress_unseamed":       # the Dataset says which model
+            lab = ds[key].attrs.get("long_name", lab)
         _tag(ax[0], kpa, None, ax[0].plot(xx, ds[key].values, ls, lw=1.4 if ls == "-" else 0.9, label=lab,
                                           color="0.4" if name == "stress_unseamed" else None))
     hit = float(ds.attrs.get("stitch_meets_punch_mm", np.inf))
