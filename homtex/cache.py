@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ._version import __version__
+from .output.io import read_netcdf, write_netcdf
 
 __all__ = ["cache_dir", "cache_key", "cached", "clear_cache", "list_cache"]
 
@@ -93,8 +94,6 @@ def cached(kind: str, cell, params: dict, compute):
     path = _path(kind, key)
     if _disk_enabled() and path.exists():
         try:
-            from .output.io import read_netcdf
-
             ds = read_netcdf(path)
             if ds.attrs.get("cache_key") == key:
                 _MEMORY[key] = ds
@@ -108,8 +107,6 @@ def cached(kind: str, cell, params: dict, compute):
     _MEMORY[key] = ds
     if _disk_enabled() and ds.attrs.get("status", "ok") == "ok":
         try:
-            from .output.io import write_netcdf
-
             write_netcdf(ds, path)
         except OSError as exc:
             log.warning("cache: could not write %s (%s); kept in memory only", path, exc)

@@ -31,6 +31,29 @@ def sewn(cell):
     return {0.3: sew(cell, prestrain=0.3, steps=3, **kw), 0.2: sew(cell, prestrain=0.2, steps=2, **kw)}
 
 
+def _check_derivatives(term, x, scale, nodes_to_check, rel, atol_g, atol_h):
+    """The term's gradient and Hessian blocks against central differences of its energy and
+    gradient at positions x, for every coordinate of the given nodes."""
+    _, g, nodes, H = term.evaluate(x, scale, True)
+    h = 1e-6
+    for k in nodes_to_check:
+        for c in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[k, c] += h
+            xm[k, c] -= h
+            ep, gp, _, _ = term.evaluate(xp, scale, False)
+            em, gm, _, _ = term.evaluate(xm, scale, False)
+            assert (ep - em) / (2 * h) == pytest.approx(g[k, c], rel=rel, abs=atol_g)
+            col = np.zeros_like(x)          # Hessian column (k, c), assembled from the element blocks
+            for r, (a, b) in enumerate(nodes):
+                for j, node in enumerate((a, b)):
+                    if node == k:
+                        blk = H[r][:, 3 * j + c].reshape(2, 3)
+                        col[a] += blk[0]
+                        col[b] += blk[1]
+            np.testing.assert_allclose((gp - gm) / (2 * h), col, atol=atol_h)
+
+
 def test_constant_tension_is_the_gradient_of_its_potential(cell):
     """V = s sum T_e l_e: the gradient is T_e along each element, the Hessian the derivative of the
     gradient (central differences), and both vanish for a straight thread pulled along itself only
@@ -43,24 +66,8 @@ def test_constant_tension_is_the_gradient_of_its_potential(cell):
     x = fr.nodes + 0.05 * rng.standard_normal(fr.nodes.shape)
     e, g, nodes, H = term.evaluate(x, 0.7, True)
     assert e == pytest.approx(0.7 * term.rate(x), rel=1e-14)
-    h = 1e-6
-    for k in rng.choice(np.unique(nodes), 4, replace=False):
-        for c in range(3):
-            xp, xm = x.copy(), x.copy()
-            xp[k, c] += h
-            xm[k, c] -= h
-            ep, gp, _, _ = term.evaluate(xp, 0.7, False)
-            em, gm, _, _ = term.evaluate(xm, 0.7, False)
-            assert (ep - em) / (2 * h) == pytest.approx(g[k, c], rel=1e-6, abs=1e-9)
-            # Hessian column (k, c): assembled from the element blocks
-            col = np.zeros_like(x)
-            for r, (a, b) in enumerate(nodes):
-                for j, node in enumerate((a, b)):
-                    if node == k:
-                        blk = H[r][:, 3 * j + c].reshape(2, 3)
-                        col[a] += blk[0]
-                        col[b] += blk[1]
-            np.testing.assert_allclose((gp - gm) / (2 * h), col, atol=1e-6)
+    _check_derivatives(term, x, 0.7, rng.choice(np.unique(nodes), 4, replace=False), rel=1e-6, atol_g=1e-9,
+                       atol_h=1e-6)
     with pytest.raises(InputError, match=">= 0"):
         ConstantTension(fr, el, -1.0)
 
@@ -261,23 +268,7 @@ def test_a_tension_only_thread_pulls_when_stretched_and_not_when_shortened(cell)
     assert np.all(f[1::2] == 0.0)
     rng = np.random.default_rng(2)
     x = fr.nodes + 1e-3 * rng.standard_normal(fr.nodes.shape)
-    e, g, nodes, H = term.evaluate(x, 1.0, True)
-    h = 1e-6
-    for k in rng.choice(np.unique(nodes), 3, replace=False):
-        for c in range(3):
-            xp, xm = x.copy(), x.copy()
-            xp[k, c] += h
-            xm[k, c] -= h
-            ep, gp, _, _ = term.evaluate(xp, 1.0, False)
-            em, gm, _, _ = term.evaluate(xm, 1.0, False)
-            assert (ep - em) / (2 * h) == pytest.approx(g[k, c], rel=1e-5, abs=1e-7)
-            col = np.zeros_like(x)
-            for r, (a, b) in enumerate(nodes):
-                for j, node in enumerate((a, b)):
-                    if node == k:
-                        blk = H[r][:, 3 * j + c].reshape(2, 3)
-                        col[a] += blk[0]
-                        col[b] += blk[1]
-            np.testing.assert_allclose((gp - gm) / (2 * h), col, atol=1e-4)
+    _check_derivatives(term, x, 1.0, rng.choice(np.unique(term.nodes), 3, replace=False), rel=1e-5, atol_g=1e-7,
+                       atol_h=1e-4)
     with pytest.raises(InputError, match="TensionOnly"):
         TensionOnly(fr, el, 100.0, 0.0)

@@ -40,6 +40,7 @@ from ..contact.incremental import EngineState, IncrementalSolver, NonlinearSetti
 from ..contact.options import Contact
 from ..contact.tension import ConstantTension
 from ..errors import InputError, SolverError
+from ..fem.corotational_system import log_nodes
 from ..geometry.seam import seam_cell
 from ..model.results import Status, set_status
 from ..model.scene import default_pins
@@ -202,8 +203,6 @@ class SewnSeam:
         if ut.shape != (frame.n_nodes, 3):
             raise InputError(f"a stored sewn state of {ut.shape[0]} nodes does not belong to this seam cell "
                              f"({frame.n_nodes} nodes)")
-        from ..fem.corotational_system import log_nodes
-
         rot = np.empty((frame.n_nodes, 3))
         log_nodes(np.ascontiguousarray(Q), rot)
         contact = Contact() if contact is None else contact
