@@ -67,9 +67,10 @@ from .model.results import Status, set_status
 from .seams import seam_profile
 from .validate import check_choice, check_int, check_number, check_seed
 
-__all__ = ["LAW_STEPS", "LAW_STRAIN", "column_heights", "engine_law", "macro_curve", "unseamed_law"]
+__all__ = ["LAW_STEPS", "LAW_STRAIN", "column_heights", "cushion_law", "engine_law", "macro_curve", "unseamed_law"]
 
 PRE_STRESS = ("thread", "held", "released")
+LAWS = ("columns", "cushion")
 
 #: the default unseamed law: the engine's curve to this strain in this many plate steps
 LAW_STRAIN = 0.7
@@ -90,6 +91,21 @@ def engine_law(cell, *, strain: float = LAW_STRAIN, steps: int = LAW_STEPS, cont
     if not cache:
         return compute()
     return cached("law", cell, {"levels": levels, "contact": contact}, compute)
+
+
+def cushion_law(cell, *, seam_distance: float, strain: float = LAW_STRAIN, steps: int = LAW_STEPS,
+                cache: bool = True):
+    """The seamed cushion's own compression law: the sewn seam cell of ``cell`` under the punch on
+    the large-motion engine (``seam_compression(cell, seam_distance=d, strain=strain, steps=steps)``:
+    ``stress`` kPa over ``strain`` = plate travel / unseamed thickness), kept in the result cache
+    (the sewn state too): the first call sews and presses (minutes), a repeated one costs
+    milliseconds. A failed press is returned (with its status) and not stored on disk."""
+    from .seams import seam_compression
+
+    kw = {"seam_distance": float(seam_distance), "strain": float(strain), "steps": int(steps)}
+    if not cache:
+        return seam_compression(cell, cache=False, **kw)
+    return cached("cushion_law", cell, kw, lambda: seam_compression(cell, **kw))
 
 
 def _thickness(cell, curve, thickness):
@@ -170,11 +186,19 @@ def column_heights(H0: float, *, seam_distance=None, profile=None, height_scatte
     cushion = np.floor(xs / d).astype(np.int64)
     h = h_of(np.mod(xs, d))
     if height_scatter:
-        rng = np.random.default_rng(seed)
-        k0 = cushion.min()
-        delta = rng.normal(0.0, float(height_scatter), cushion.max() - k0 + 1)
-        h = h * ((hc + delta[cushion - k0]) / hc)
+        h = h * ((hc + cushion_shifts(cushion, height_scatter, seed)) / hc)
     return x, np.clip(h, 1e-9, H0), cushion - cushion.min()
+
+
+def cushion_shifts(cushion, height_scatter: float, seed) -> np.ndarray:
+    """Per column (n,): the height difference delta_k (mm) of its cushion k from the nominal one,
+    drawn once per cushion ~ Normal(0, ``height_scatter``) (seeded)."""
+    cushion = np.asarray(cushion, dtype=np.int64)
+    if not height_scatter:
+        return np.zeros(cushion.shape)
+    rng = np.random.default_rng(seed)
+    k0 = cushion.min()
+    return rng.normal(0.0, float(height_scatter), cushion.max() - k0 + 1)[cushion - k0]
 
 
 def _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options, profile_options):
@@ -203,7 +227,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
                 steps: int = 201, thickness: float | None = None, pre_stress: str = "thread",
                 slack_travel: float | None = None, seam_offset: float = 0.0, compress_options: dict | None = None,
-                profile_options: dict | None = None) -> xr.Dataset:
+                profile_options: dict | None = None, law: str = "columns", cushion_curve=None) -> xr.Dataset:
     """Force-compression curve of a (seamed) specimen under a flat punch: the cushion layer.
 
     Parameters
@@ -230,6 +254,14 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     seam_offset : position of a seam line from the plate edge, mm (profile x = 0 is a seam line).
     compress_options, profile_options : keyword arguments for ``homtex.compress`` and
         ``homtex.seam_profile`` (e.g. ``{"method": "foundation"}``) where they are called.
+    law : "columns" (default: every column follows the unseamed law from its cushion height, see
+        the module docstring) or "cushion" (every cushion follows the seamed cushion's own curve,
+        ``cushion_curve`` or :func:`cushion_law`: the sewn seam cell pressed at yarn level, so the
+        seam line, the bent layers and the slackening thread are in it; a cushion delta_k higher
+        than the nominal one meets the punch delta_k earlier: its curve shifted by delta_k in plate
+        travel. Needs ``seam_distance``; the columns still give the engaged fraction.)
+    cushion_curve : the "cushion" law's curve: Dataset with ``stress`` (kPa) over ``strain``
+        (plate travel / H0, from the unseamed thickness), e.g. ``seam_compression`` of the cell.
 
     Returns
     -------
@@ -239,6 +271,10 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     """
     t0 = time.perf_counter()
     check_choice(pre_stress, "pre_stress", PRE_STRESS)
+    mode = check_choice(law, "law", LAWS)       # (below, ``law`` is the unseamed law's function)
+    if mode == "cushion" and seam_distance is None:
+        raise InputError("macro_curve(law='cushion') needs seam_distance (mm): without seams every column is the "
+                         "unseamed fabric (law='columns')")
     if slack_travel is not None:   # inf allowed: the "held" limit
         slack_travel = check_number(slack_travel, "slack_travel", ge=0.0, finite=False)
     strain = check_number(strain, "strain", gt=0.0, lt=1.0)
@@ -309,6 +345,24 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
             held = (1.0 - w / delta) * (cum[k] - cum[j]) + (cw[k] - cw[j]) / delta
         total = total - held
     force = total * a * 1e-3  # kPa mm^2 -> N
+    if mode == "cushion":
+        t_c = time.perf_counter()
+        if cushion_curve is None:
+            if cell is None:
+                raise InputError("macro_curve(law='cushion'): give a cell or a cushion_curve")
+            cushion_curve = cushion_law(cell, seam_distance=float(seam_distance), strain=max(float(strain), LAW_STRAIN))
+        t_sub += time.perf_counter() - t_c
+        claw, c_max = unseamed_law(cushion_curve)
+        shift = cushion_shifts(cushion, height_scatter, seed) / H0      # (n_columns,) strain
+        need = eps_end + max(float(shift.max(initial=0.0)), 0.0)     # the tallest cushion is the furthest in
+        if c_max < need - 1e-12:
+            attrs = getattr(cushion_curve, "attrs", {})
+            why = attrs.get("status_detail", attrs.get("status", "unknown"))
+            status, detail = Status.FAILED, (f"the cushion's curve ends at strain {c_max:.4g} < {need:.4g} "
+                                             f"(its status: {why}); curve truncated")
+        e_col = np.clip(eps[:, None] + shift[None, :], 0.0, None)
+        sig = np.where(e_col <= c_max + 1e-12, claw(np.minimum(e_col, c_max)), np.nan)
+        force = sig.sum(axis=1) * a * 1e-3
     frac = k / n_columns
     seconds = time.perf_counter() - t0 - t_sub
     per = {k: float(h[cushion == k].max()) for k in np.unique(cushion)}
@@ -325,7 +379,9 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                 "strain": ("plate_displacement", eps,
                            {"units": "1", "long_name": "compression strain (plate displacement / unseamed thickness)"}),
                 "column_x": ("column_x", x, {"units": "mm", "long_name": "column centre across the seams"})},
-        attrs={"model": "macro cushion layer (columns engaged one after another)", "thickness_mm": H0,
+        attrs={"model": ("macro cushion layer (columns engaged one after another)" if mode == "columns" else
+                         "macro cushion layer (each cushion on the sewn seam cell's own yarn-level curve, shifted by "
+                         "its height)"), "law": mode, "thickness_mm": H0,
                "plate_area_mm2": float(plate_area),
                "seam_distance_mm": "none" if seam_distance is None else float(seam_distance),
                "height_scatter_mm": float(height_scatter), "seed": "none" if seed is None else int(seed),

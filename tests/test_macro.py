@@ -247,3 +247,34 @@ def test_the_default_law_is_the_engines_curve_to_70_percent_computed_once(monkey
     assert a.attrs["status"] == b.attrs["status"] == "ok"
     np.testing.assert_allclose(b.force.values[-1], 40.0 * 0.5 * a.attrs["plate_area_mm2"] * 1e-3, rtol=1e-12)
     cache.clear_cache()
+
+
+def test_cushion_law_is_the_cushion_curve_shifted_by_each_cushions_height():
+    """law="cushion": every cushion follows the seamed cushion's own curve; without scatter the
+    plate's stress is that curve, with scatter each cushion's curve is shifted by its height
+    difference delta_k (a linear curve sigma = K eps, none before contact, gives the closed form
+    K sum_i (eps + delta_i / H0)+ / n over the columns); a curve shorter than the travel is
+    truncated and reported."""
+    import xarray as xr
+
+    from homtex.macro import column_heights, cushion_shifts
+
+    K = 50.0
+    e = np.linspace(0.0, 0.8, 81)
+    cc = xr.Dataset({"stress": ("strain", K * e)}, coords={"strain": e})
+    kw = dict(curve=linear, thickness=H0, seam_distance=24.0, profile=bump(), slack_travel=0.1, law="cushion",
+              cushion_curve=cc, steps=51, strain=0.5)
+    ds = macro_curve(**kw)
+    eps = ds.strain.values
+    np.testing.assert_allclose(ds.stress.values, K * eps, atol=1e-9)
+    assert ds.attrs["law"] == "cushion"
+    sc = macro_curve(**kw, height_scatter=1.5, seed=3)
+    _, _, cushion = column_heights(H0, seam_distance=24.0, profile=bump(), plate_area=A, n_columns=440)
+    d = cushion_shifts(cushion, 1.5, 3)
+    ref = K * np.maximum(eps[:, None] + d[None, :] / H0, 0.0).mean(axis=1)
+    np.testing.assert_allclose(sc.stress.values, ref, atol=1e-9)
+    assert np.ptp(d) > 1.0 and np.any(sc.stress.values != ds.stress.values)
+    short = macro_curve(**{**kw, "strain": 0.9})
+    assert short.attrs["status"] == "failed" and "cushion's curve ends" in short.attrs["status_detail"]
+    with pytest.raises(InputError, match="needs seam_distance"):
+        macro_curve(curve=linear, thickness=H0, law="cushion")

@@ -272,3 +272,30 @@ def test_a_tension_only_thread_pulls_when_stretched_and_not_when_shortened(cell)
                        atol_h=1e-4)
     with pytest.raises(InputError, match="TensionOnly"):
         TensionOnly(fr, el, 100.0, 0.0)
+
+
+def test_a_strip_of_identical_seams_is_the_seam_cell_twice(sewn, cell):
+    """Two seams sewn alike side by side (a 2-seam strip, x period 2 d) are the periodic seam cell
+    repeated: each cushion and the seam line as in the single cell, twice its pre-strain work
+    (frictionless; the strip's one level to eps0 = 0.1 is the first level of the single cell's
+    ramp to 0.2); pre-strains per seam land on their own stitch."""
+    from homtex.seams.sew import seam_frame
+    from homtex.seams.strip import strip_cushions
+
+    one = sewn[0.2]
+    assert float(one.path.prestrain_scale[0]) * 0.2 == pytest.approx(0.1)
+    two = sew(cell, seam_distance=D_SMALL, prestrain=[0.1, 0.1], seams=2, steps=1,
+              contact=homtex.Contact(friction=0.0))
+    assert two.status == "ok", two.detail
+    assert two.frame.n_nodes == 2 * one.frame.n_nodes
+    np.testing.assert_allclose(strip_cushions(two), float(one.path.cushion_height[0]), atol=2e-3)
+    assert float(two.path.seam_height[-1]) == pytest.approx(float(one.path.seam_height[0]), abs=2e-3)
+    assert float(two.path.prestrain_work[-1]) == pytest.approx(2 * float(one.path.prestrain_work[0]), rel=1e-3)
+    f, info = seam_frame(cell, seam_distance=D_SMALL, prestrain=[0.1, 0.3], seams=2)
+    pre = np.asarray(f.prestrain)
+    xs = f.nodes[f.elements[:, 0], 0]
+    st = np.arange(f.n_elements) >= info["fabric_elements"]
+    near = np.abs(xs - info["seam_xs"][1]) < 1e-9
+    assert np.all(pre[st & near] == 0.3) and np.all(pre[st & ~near] == 0.1) and np.all(pre[~st] == 0.0)
+    with pytest.raises(InputError, match="one per seam"):
+        seam_frame(cell, seam_distance=D_SMALL, prestrain=[0.1, 0.2, 0.3], seams=2)

@@ -121,16 +121,19 @@ def leg_position(cell, r_stitch: float, ny: int = 40) -> tuple[float, float, flo
     return best[1], best[2], best[0] - float(r_stitch)
 
 
-def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: int = 1, exact: bool = False,
-              elements_per_mm: float = 2.0, leg_elements: int = 4, seam_table: dict | None = None):
+def seam_cell(cell, *, seam_distance: float, prestrain=0.0, stitches: int = 1, exact: bool = False,
+              elements_per_mm: float = 2.0, leg_elements: int = 4, seam_table: dict | None = None, seams: int = 1):
     """Yarn-level seam cell of a spacer fabric cell (see the module docstring).
 
     Parameters
     ----------
     cell : spacer Cell with a [parameters.seam] table (stitch_length, yarn) and the stitch yarn type.
     seam_distance : d, mm (rounded to whole fabric repeats across the wales unless ``exact``).
-    prestrain : eps0 on every stitch element.
+    prestrain : eps0 on every stitch element, or one per seam ((seams,): a strip whose seams were
+        sewn at different tensions).
     stitches : stitches along y in the cell (1: one stitch length; 2: a 2-stitch supercell).
+    seams : seams in the cell, ``seam_distance`` apart (1: the seam cell; k > 1: a strip of k
+        cushions, x period k d; seam i at x_s + i d).
     elements_per_mm : elements per mm of the needle and bobbin chains.
     leg_elements : elements per leg (top/bottom surface to the interlock).
 
@@ -151,13 +154,21 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
     if yname not in cell.yarns:
         raise InputError(f"[parameters.seam] yarn {yname!r} is not a yarn type of cell "
                          f"{getattr(cell, 'name', '?')!r} (known: {sorted(cell.yarns)})")
-    eps0 = float(prestrain)
-    if not (math.isfinite(eps0) and 0.0 <= eps0 < 1.0):
-        raise InputError(f"prestrain must lie in [0, 1), got {prestrain!r}")
+    if int(seams) != seams or seams < 1:
+        raise InputError(f"seams must be a positive integer, got {seams!r}")
+    seams = int(seams)
+    eps_seam = np.atleast_1d(np.asarray(prestrain, dtype=float))
+    if eps_seam.shape == (1,):
+        eps_seam = np.full(seams, eps_seam[0])
+    if eps_seam.shape != (seams,):
+        raise InputError(f"prestrain must be one number or one per seam ({seams}), got {np.shape(prestrain)}")
+    for i, e in enumerate(eps_seam):
+        if not (math.isfinite(e) and 0.0 <= e < 1.0):
+            raise InputError(f"prestrain of seam {i + 1} must lie in [0, 1), got {e!r}")
     til = seam_tiling(cell, seam_distance, s, stitches=stitches, exact=exact)
     base = cell.frame
     bond = (cell.groups or {}).get("interlacing")
-    fab, node_copy, elem_copy, elem_src = tile_frame(base, til["n_x"], til["n_y"], bond=bond)
+    fab, node_copy, elem_copy, elem_src = tile_frame(base, til["n_x"] * seams, til["n_y"], bond=bond)
     T = float(cell.info["thickness"])
     w = float(cell.info["wale_spacing"])
     yt = cell.yarns[yname]
@@ -165,49 +176,52 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
     E_s, nu_s = float(yt.E), float(yt.nu)
     Ly_cell = til["n_y"] * til["Ly"]
     x_s, y_s, clearance = leg_position(cell, r_s)
-    # ---- stitch nodes
+    # ---- stitch nodes: per seam a needle and a bobbin chain along y and the legs at the stitch points
     n_chain = max(2, int(math.ceil(s * elements_per_mm)))
     n_chain_tot = n_chain * int(stitches)
     yc = y_s + np.arange(n_chain_tot) * (Ly_cell / n_chain_tot)
     n0 = fab.n_nodes
-    needle = n0 + np.arange(n_chain_tot)
-    bobbin = needle + n_chain_tot
-    pts = [np.column_stack([np.full(n_chain_tot, x_s), yc, np.full(n_chain_tot, T + r_s)]),
-           np.column_stack([np.full(n_chain_tot, x_s), yc, np.full(n_chain_tot, -r_s)])]
-    nxt = n0 + 2 * n_chain_tot
-    els, imgs, leg = [], [], []
-    for chain in (needle, bobbin):
-        a = chain
-        b = np.roll(chain, -1)
-        im = np.zeros((n_chain_tot, 2), dtype=np.int64)
-        im[-1, 1] = 1
-        els.append(np.column_stack([a, b]))
-        imgs.append(im)
-        leg.append(np.zeros(n_chain_tot, dtype=bool))
-    inter, leg_top, leg_bot = [], [], []
+    d_eff = float(til["seam_distance"])
     nl = max(1, int(leg_elements))
-    for k in range(int(stitches)):
-        top = needle[k * n_chain]
-        bot = bobbin[k * n_chain]
-        y = yc[k * n_chain]
-        # interior leg nodes: needle leg from top down to T/2, bobbin leg from bottom up to T/2
-        zt = (T + r_s) - (T / 2 + r_s) * np.arange(1, nl + 1) / nl          # ends at T/2
-        zb = -r_s + (T / 2 + r_s) * np.arange(1, nl) / nl                    # interior of bobbin leg
-        idx_t = nxt + np.arange(nl)
-        idx_b = nxt + nl + np.arange(nl - 1)
-        nxt += 2 * nl - 1
-        pts.append(np.column_stack([np.full(nl, x_s), np.full(nl, y), zt]))
-        pts.append(np.column_stack([np.full(nl - 1, x_s), np.full(nl - 1, y), zb]))
-        mid = idx_t[-1]
-        chain_t = np.r_[top, idx_t]
-        chain_b = np.r_[bot, idx_b, mid]
-        for ch in (chain_t, chain_b):
-            els.append(np.column_stack([ch[:-1], ch[1:]]))
-            imgs.append(np.zeros((len(ch) - 1, 2), dtype=np.int64))
-            leg.append(np.ones(len(ch) - 1, dtype=bool))
-        inter.append(mid)
-        leg_top.append(top)
-        leg_bot.append(bot)
+    pts, els, imgs, leg, eps_el = [], [], [], [], []
+    needles, bobbins, inter, leg_top, leg_bot = [], [], [], [], []
+    nxt = n0
+    for j in range(seams):
+        xj = x_s + j * d_eff
+        needle = nxt + np.arange(n_chain_tot)
+        bobbin = needle + n_chain_tot
+        nxt += 2 * n_chain_tot
+        needles.append(needle)
+        bobbins.append(bobbin)
+        pts += [np.column_stack([np.full(n_chain_tot, xj), yc, np.full(n_chain_tot, T + r_s)]),
+                np.column_stack([np.full(n_chain_tot, xj), yc, np.full(n_chain_tot, -r_s)])]
+        for chain in (needle, bobbin):
+            im = np.zeros((n_chain_tot, 2), dtype=np.int64)
+            im[-1, 1] = 1
+            els.append(np.column_stack([chain, np.roll(chain, -1)]))
+            imgs.append(im)
+            leg.append(np.zeros(n_chain_tot, dtype=bool))
+        for k in range(int(stitches)):
+            top = needle[k * n_chain]
+            bot = bobbin[k * n_chain]
+            y = yc[k * n_chain]
+            # interior leg nodes: needle leg from top down to T/2, bobbin leg from bottom up to T/2
+            zt = (T + r_s) - (T / 2 + r_s) * np.arange(1, nl + 1) / nl          # ends at T/2
+            zb = -r_s + (T / 2 + r_s) * np.arange(1, nl) / nl                    # interior of bobbin leg
+            idx_t = nxt + np.arange(nl)
+            idx_b = nxt + nl + np.arange(nl - 1)
+            nxt += 2 * nl - 1
+            pts.append(np.column_stack([np.full(nl, xj), np.full(nl, y), zt]))
+            pts.append(np.column_stack([np.full(nl - 1, xj), np.full(nl - 1, y), zb]))
+            mid = idx_t[-1]
+            for ch in (np.r_[top, idx_t], np.r_[bot, idx_b, mid]):
+                els.append(np.column_stack([ch[:-1], ch[1:]]))
+                imgs.append(np.zeros((len(ch) - 1, 2), dtype=np.int64))
+                leg.append(np.ones(len(ch) - 1, dtype=bool))
+            inter.append(mid)
+            leg_top.append(top)
+            leg_bot.append(bot)
+        eps_el.append(np.full(sum(len(e) for e in els) - sum(len(e) for e in eps_el), eps_seam[j]))
     s_nodes = np.vstack(pts)
     s_el = np.vstack(els)
     s_img = np.vstack(imgs)
@@ -223,7 +237,7 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
     fab_fields["prestrain"] = np.zeros(fab.n_elements)
     stitch_fields = {"semi_axes": np.column_stack([rad, rad]), "E": np.full(ms, E_s), "nu": np.full(ms, nu_s),
                      "yarn": np.full(ms, sid), "ref": ref, "contact_radius": np.full(ms, r_s),
-                     "prestrain": np.full(ms, eps0), "strain_limit": np.full(ms, float(yt.strain_limit))}
+                     "prestrain": np.concatenate(eps_el), "strain_limit": np.full(ms, float(yt.strain_limit))}
     frame = Frame(nodes, np.vstack([fab.elements, s_el]), periods=fab.periods,
                   images=np.vstack([fab.images, s_img]), **stack_fields(fab_fields, stitch_fields))
     m_f = fab.n_elements
@@ -239,9 +253,11 @@ def seam_cell(cell, *, seam_distance: float, prestrain: float = 0.0, stitches: i
         "stitch_length": s, "stitches": int(stitches), "n_x": til["n_x"], "n_y": til["n_y"],
         "stitch_yarn": sid, "stitch_radius": r_s, "stitch_EA": E_s * math.pi * r_s ** 2,
         "legs": np.r_[np.zeros(m_f, dtype=bool), is_leg],
-        "needle_nodes": needle, "bobbin_nodes": bobbin, "interlock_nodes": np.array(inter),
-        "leg_top_nodes": np.array(leg_top), "leg_bottom_nodes": np.array(leg_bot),
-        "fabric_nodes": n0, "fabric_elements": m_f, "prestrain": eps0, "element_source": elem_src,
+        "needle_nodes": np.concatenate(needles), "bobbin_nodes": np.concatenate(bobbins),
+        "interlock_nodes": np.array(inter), "leg_top_nodes": np.array(leg_top), "leg_bottom_nodes": np.array(leg_bot),
+        "fabric_nodes": n0, "fabric_elements": m_f, "element_source": elem_src,
+        "prestrain": float(eps_seam[0]) if seams == 1 else eps_seam, "seams": seams,
+        "seam_xs": x_s + d_eff * np.arange(seams),
         "wale_spacing": w, "course_spacing": cell.info.get("course_spacing"),
     }
     return frame, info

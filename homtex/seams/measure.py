@@ -28,12 +28,13 @@ def measure_profile(frame, info, u=None):
     centres, bin 0 on the seam line) the distance between the outermost top-layer yarn surface
     (max z + r) and the outermost bottom-layer yarn surface (min z - r); stitch yarn excluded.
 
-    Returns (x (2 n_x w,) bin centres relative to the seam line in [-d/2, d/2), mm; h (same), mm).
+    Returns (x (n_x,) bin centres relative to the seam line in [-d/2, d/2), mm; h (same), mm); a strip
+    of k seams (``info["seams"]``): over its period k d, relative to its first seam.
     """
     x = frame.nodes if u is None else frame.nodes + np.asarray(u)[:frame.n_nodes, :3]
     top, bot, r = _surface_nodes(frame, info)
     w = float(info["wale_spacing"])
-    d = float(info["seam_distance"])
+    d = float(info["seam_distance"]) * int(info.get("seams", 1))    # the x period
     nb = int(round(d / w))
     X = x[:, 0] - float(info["seam_x"])
     k = np.mod(np.round(X / w).astype(np.int64), nb)          # bin of each node, 0 = seam line
@@ -112,7 +113,7 @@ def leg_shortening(frame, info, u, legs=None):
     el = frame.elements
     sh = frame.shift
     v1 = x1[el[:, 1]] + sh - x1[el[:, 0]]
-    d = float(info["seam_distance"])
+    d = float(info["seam_distance"]) * int(info.get("seams", 1))     # the x period
     xc, loss = [], []
     for e in legs:
         sgn = np.sign(v0[e, 2])[:, None]

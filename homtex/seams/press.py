@@ -111,7 +111,7 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
     area = float(abs(np.cross(frame.periods[0], frame.periods[1])[2]))
     nf = int(info["fabric_nodes"])
     w = float(info["wale_spacing"])
-    nb = int(round(float(info["seam_distance"]) / w))
+    nb = int(round(float(info["seam_distance"]) * int(info.get("seams", 1)) / w))   # wale bins over the x period
     legs = np.asarray(info["legs"], dtype=bool)
     rows = {k: [] for k in ("strain", *_META)}
     status, detail = Status.OK, ""

@@ -42,7 +42,7 @@ METHODS = ("yarn", "foundation")
 #: thread 40 %"), the setting the calibrated stitch parameter stands for
 PAPER_SETTING = 0.40
 
-_SEAM_CELL_KEYS = ("stitches", "exact", "elements_per_mm", "leg_elements")
+_SEAM_CELL_KEYS = ("stitches", "exact", "elements_per_mm", "leg_elements", "seams")
 
 
 def paper_setting(cell: Cell, relative: float) -> dict:

@@ -84,15 +84,15 @@ _PATH = {
 }
 
 
-def seam_frame(cell: Cell, *, seam_distance: float, prestrain: float, stitches: int = 1, exact: bool = False,
-               elements_per_mm: float | None = None, leg_elements: int | None = None):
+def seam_frame(cell: Cell, *, seam_distance: float, prestrain, stitches: int = 1, exact: bool = False,
+               elements_per_mm: float | None = None, leg_elements: int | None = None, seams: int = 1):
     """(frame, info) of the seam cell with the cell file's stitch resolution (see
     :func:`homtex.geometry.seam.seam_cell`)."""
     seam = (cell.parameters or {}).get("seam") or {}
     epm = float(seam.get("elements_per_mm", 1.0)) if elements_per_mm is None else float(elements_per_mm)
     nl = int(seam.get("leg_elements", 4)) if leg_elements is None else int(leg_elements)
     return seam_cell(cell, seam_distance=seam_distance, prestrain=prestrain, stitches=stitches, exact=exact,
-                     elements_per_mm=epm, leg_elements=nl)
+                     elements_per_mm=epm, leg_elements=nl, seams=seams)
 
 
 def seam_supports(frame, info) -> dict:
@@ -193,9 +193,10 @@ class SewnSeam:
         ``seam_kw`` the same seam-cell arguments as when it was sewn)."""
         stitch = str(ds.attrs["stitch"])
         eps0 = float(ds.attrs["prestrain"])
+        per_seam = _events(ds.attrs.get("seam_prestrains", [eps0]))
         frame, info = seam_frame(cell, seam_distance=float(ds.attrs.get("requested_seam_distance_mm",
                                                                          ds.attrs["seam_distance_mm"])),
-                                 prestrain=eps0, **seam_kw)
+                                 prestrain=per_seam if per_seam.size > 1 else eps0, **seam_kw)
         frame = imperfect(frame, info, float(ds.attrs.get("imperfection_mm", 0.0)),
                           None if str(ds.attrs.get("seed", "none")) == "none" else int(ds.attrs["seed"]))
         ut = np.asarray(ds["ut"].values, dtype=float)
@@ -272,7 +273,7 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
         tension: float | None = None, contact: Contact | None = None, steps: int | None = None,
         max_cuts: int = 6, refine: float = 0.01, perturbation: float | None = None, imperfection: float = 0.0,
         seed=None, stitches: int = 1, exact: bool = False, elements_per_mm: float | None = None,
-        leg_elements: int | None = None, progress_log: bool = True, stop=None) -> SewnSeam:
+        leg_elements: int | None = None, progress_log: bool = True, stop=None, seams: int = 1) -> SewnSeam:
     """Sew the seam cell of ``cell`` on the large-motion engine (see the module docstring).
 
     Parameters
@@ -280,7 +281,8 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
     cell : spacer Cell with a [parameters.seam] table.
     seam_distance : d, mm (rounded to whole fabric repeats across the wales unless ``exact``).
     stitch : "length" or "tension" (default: ``[parameters.seam] stitch``, else "length").
-    prestrain : eps0 of a length-controlled stitch (default ``[parameters.seam] prestrain``).
+    prestrain : eps0 of a length-controlled stitch (default ``[parameters.seam] prestrain``); with
+        ``seams`` > 1 one per seam may be given.
     tension : needle-thread tension of a tension-controlled stitch, N per strand (default
         ``[parameters.seam] tension``).
     contact : homtex.Contact (default: ``Contact()`` with the cell file's [contact] friction).
@@ -290,6 +292,7 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
         (default: half the thinnest contact radius).
     imperfection, seed : standard deviation (mm) of a seeded random lateral offset of the pile's
         interior nodes (default 0: a perfect fabric).
+    seams : seams in the cell, ``seam_distance`` apart (a strip of cushions, :mod:`homtex.seams.strip`).
     stop : ``stop(row) -> bool`` called with every accepted level's path row (a dict of
         :data:`_PATH`); True ends the ramp there (status "ok", ``ramp_done`` below 1: a calibration
         that only needs the ramp until the cushion passes its target).
@@ -305,11 +308,20 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
     stitch = check_choice(seam.get("stitch", "length") if stitch is None else stitch, "stitch", STITCHES)
     check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
     eps0, T = 0.0, 0.0
+    seams = check_int(seams, "seams", ge=1, le=100)
+    per_seam = None
     if stitch == "length":
         if tension is not None:
             raise InputError("tension= is for stitch='tension'; a length-controlled stitch takes prestrain=")
-        eps0 = check_number(seam.get("prestrain", 0.0) if prestrain is None else prestrain, "prestrain",
-                            ge=0.0, lt=1.0)
+        if prestrain is not None and np.ndim(prestrain) == 1:
+            if len(prestrain) != seams:
+                raise InputError(f"prestrain: {len(prestrain)} values for {seams} seams (one per seam, or one)")
+            per_seam = np.array([check_number(e, f"prestrain of seam {i + 1}", ge=0.0, lt=1.0)
+                                 for i, e in enumerate(prestrain)])
+            eps0 = float(per_seam.mean())
+        else:
+            eps0 = check_number(seam.get("prestrain", 0.0) if prestrain is None else prestrain, "prestrain",
+                                ge=0.0, lt=1.0)
     else:
         if prestrain is not None:
             raise InputError("prestrain= is for stitch='length'; a tension-controlled stitch takes tension= (N)")
@@ -323,8 +335,9 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
         raise InputError(f"contact must be a homtex.Contact, got {type(contact).__name__}")
     contact = Contact() if contact is None else contact
     t0, c0 = time.perf_counter(), time.process_time()
-    frame, info = seam_frame(cell, seam_distance=seam_distance, prestrain=eps0, stitches=stitches, exact=exact,
-                             elements_per_mm=elements_per_mm, leg_elements=leg_elements)
+    frame, info = seam_frame(cell, seam_distance=seam_distance, prestrain=eps0 if per_seam is None else per_seam,
+                             stitches=stitches, exact=exact, elements_per_mm=elements_per_mm,
+                             leg_elements=leg_elements, seams=seams)
     frame = imperfect(frame, info, imperfection, seed)
     fixed = seam_supports(frame, info)
     spec = seam_friction(cell, frame, info) if contact.friction is None else None
@@ -372,7 +385,8 @@ def sew(cell: Cell, *, seam_distance: float, stitch: str | None = None, prestrai
              "cpu_seconds": time.process_time() - c0, "ramp_steps": steps,
              "ramp_done": done, "branch_switches": np.array(stepper.events, dtype=float).reshape(-1),
              "perturbation_mm": float(stepper.perturbation), "imperfection_mm": imperfection,
-             "seed": "none" if seed is None else int(seed), "n_nodes": int(frame.n_nodes),
+             "seed": "none" if seed is None else int(seed), "n_nodes": int(frame.n_nodes), "seams": seams,
+             "seam_prestrains": np.full(seams, eps0) if per_seam is None else per_seam,
              "n_elements": int(frame.n_elements), "friction_max": float(max(sol.scene.mu_table.max(initial=0.0),
                                                                              sol.scene.mu_plate.max(initial=0.0)))}
     set_status(path, status, detail)
