@@ -41,6 +41,9 @@ _LAZY = {
     "Lattice": ".contact.lattice",
     "RestState": ".model.rest",
     "YarnCompression": ".model.compression",
+    "relax": ".knits",
+    "tensile": ".knits",
+    "RelaxedCell": ".knits",
     "clear_cache": ".cache",
 }
 

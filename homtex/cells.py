@@ -67,6 +67,7 @@ GENERATORS: dict[str, str] = {
     "octet": "homtex.geometry.lattices:build_octet",
     "lattice": "homtex.geometry.lattices:build_lattice",
     "spacer": "homtex.geometry.spacer:build_cell",
+    "weft_knit": "homtex.geometry.knit_cell:build_cell",
 }
 
 TABLES = ("cell", "parameters", "yarns", "resolution", "contact", "validity")

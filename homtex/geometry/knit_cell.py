@@ -1,0 +1,197 @@
+"""The ``weft_knit`` cell generator: a cell file's notation, loop length and yarn -> a periodic
+frame of straight-at-rest yarns (:func:`build_cell`), one equivalent yarn per course or N
+parallel filaments.
+
+Cell-file keys (``[parameters]``; lengths in mm):
+
+* ``notation`` (array of strings, one per course; :func:`~homtex.geometry.weft_knit.parse_notation`),
+  ``needles`` (bed width in needle positions, default the notation's), ``loop_length`` (stitch
+  length), ``wale_spacing`` and ``course_spacing`` (optional, both or neither: the loop-geometry
+  model scales with the loop length otherwise), ``repeat`` ([courses-direction, wales-direction]
+  copies of the pattern in the cell, default [1, 1]), ``yarn`` (the yarn table, default the only one);
+* ``[parameters.yarn_model]``: ``filaments`` (N, default 1: the yarn table is the yarn itself),
+  ``model`` ("equivalent": one beam with the bundle's axial stiffness N E A_f and the filaments'
+  bending and torsion rigidity N E I_f, N G J_f, contact radius of the packed bundle; or
+  "filaments": N beams, each its own chain, packed hexagonally around the centerline and in
+  contact with each other), ``packing`` (fibre volume fraction of the bundle's section, default
+  0.9069, hexagonal), ``gap`` (clearance between neighbouring filaments at creation, share of the
+  filament radius, default 0.05), ``density`` (kg/mm^3, optional: the yarn's linear density in tex
+  is reported), ``failure_stress`` (MPa, optional: tensile tests flag filaments beyond it);
+* ``[parameters.compression]`` (optional, the yarns flatten where they cross;
+  :class:`~homtex.model.compression.YarnCompression` data): ``travel`` and ``force`` (a yarn
+  compression test between plates: mm after first contact, N), ``diameter`` (mm),
+  ``core_fraction`` (hard core / radius, default 0.15), ``contact_length`` (mm, default one
+  diameter); or ``shell``, ``stiffness``, ``exponent`` directly;
+* ``[resolution] element_length`` (mm, default a tenth of the loop length).
+
+The frame's yarn ids are (course, filament); ``info`` holds the rest state (straight, parallel
+transported), the compression law, the loop geometry, the wale (a2, y) and course (a1, x)
+directions, the stitches and needle positions of the cell, and the overlaps at creation.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ..errors import CellError
+from ..model.compression import YarnCompression
+from ..model.frame import Frame
+from ..model.rest import node_frames, straight_rest
+from ..validate import check_keys, get_int, get_list, get_number, get_str, get_table
+from .curves import overlap_summary, yarn_overlaps
+from .weft_knit import course_curve, hex_offsets, knit_geometry, parse_notation, resample
+
+log = logging.getLogger(__name__)
+
+__all__ = ["build_cell", "knit_frame"]
+
+KEYS = ("notation", "needles", "loop_length", "wale_spacing", "course_spacing", "repeat", "yarn", "yarn_model",
+        "compression", "take_down_needles")
+MODEL_KEYS = ("filaments", "model", "packing", "gap", "density", "failure_stress")
+COMP_KEYS = ("travel", "force", "diameter", "core_fraction", "contact_length", "shell", "stiffness", "exponent",
+             "source")
+
+
+def _compression(d: dict):
+    """The YarnCompression of a [parameters.compression] table (or None)."""
+    if not d:
+        return None
+    t = "parameters.compression"
+    check_keys(d, COMP_KEYS, t)
+    src = get_str(d, "source", t, default="")
+    if "travel" in d or "force" in d:
+        travel = get_list(d, "travel", t, gt=0)
+        force = get_list(d, "force", t, gt=0)
+        return YarnCompression.from_plate_test(travel, force, diameter=get_number(d, "diameter", t, gt=0),
+                                               core_fraction=get_number(d, "core_fraction", t, ge=0, lt=1,
+                                                                        default=0.15),
+                                               contact_length=get_number(d, "contact_length", t, gt=0, required=False),
+                                               source=src)
+    return YarnCompression(shell=get_number(d, "shell", t, gt=0), stiffness=get_number(d, "stiffness", t, gt=0),
+                           exponent=get_number(d, "exponent", t, ge=1, le=20, default=1.0), source=src)
+
+
+def _yarn_model(d: dict, yarn) -> dict:
+    t = "parameters.yarn_model"
+    check_keys(d, MODEL_KEYS, t)
+    n = get_int(d, "filaments", t, default=1, ge=1)
+    model = get_str(d, "model", t, default="equivalent", choices=("equivalent", "filaments"))
+    packing = get_number(d, "packing", t, gt=0, le=0.9069, default=0.9069)
+    gap = get_number(d, "gap", t, ge=0, le=1, default=0.05)
+    density = get_number(d, "density", t, gt=0, required=False)
+    failure = get_number(d, "failure_stress", t, gt=0, required=False)
+    rf = yarn.rc
+    bundle = rf * np.sqrt(n / packing) if n > 1 else rf
+    tex = None if density is None else n * np.pi * yarn.a * yarn.b * density * 1e9   # g/km
+    return {"filaments": n, "model": model, "packing": packing, "gap": gap, "bundle_radius": float(bundle),
+            "filament_radius": float(rf), "tex": tex, "failure_stress": failure}
+
+
+def knit_frame(pattern, geo: dict, yarn, ym: dict, element_length: float, repeat=(1, 1)) -> tuple:
+    """(Frame, course index per element, filament per element) of the knit ``pattern`` with the loop
+    geometry ``geo`` (:func:`~homtex.geometry.weft_knit.knit_geometry`), yarn type ``yarn`` and yarn
+    model ``ym``, repeated ``repeat`` = (along the courses, along the wales) times."""
+    nx, ny = repeat
+    C, N = pattern.n_courses, pattern.n_needles
+    width = N * geo["pitch"] * nx
+    height = C * geo["c"] * ny
+    keys = ("pitch", "c", "h", "d", "Z0", "a")
+    centre, course_of = [], []
+    for q in range(ny):
+        for j in range(C):
+            cur = course_curve(pattern, j, **{k: geo[k] for k in keys})
+            cur = np.vstack([cur + [k * N * geo["pitch"], 0.0, 0.0] for k in range(nx)])
+            cur[:, 1] += q * C * geo["c"]
+            L = float(np.linalg.norm(np.diff(np.vstack([cur, cur[:1] + [width, 0, 0]]), axis=0), axis=1).sum())
+            n_el = max(8 * N * nx, int(np.ceil(L / element_length)))
+            centre.append(resample(cur, width, n_el))
+            course_of.append(q * C + j)
+    periods = np.array([[width, 0.0, 0.0], [0.0, height, 0.0]])
+    nf = ym["filaments"] if ym["model"] == "filaments" else 1
+    offs = hex_offsets(nf, 2.0 * ym["filament_radius"] * (1.0 + ym["gap"])) if nf > 1 else np.zeros((1, 2))
+    nodes, els, yarn_id, img, crs, fil = [], [], [], [], [], []
+    base = 0
+    for cid, pts in zip(course_of, centre):
+        k = len(pts)
+        chain = np.c_[np.arange(k), (np.arange(k) + 1) % k]
+        if nf > 1:
+            D = node_frames(Frame(pts, chain, radius=1.0, E=1.0, nu=0.3, periods=periods,
+                                  images=np.r_[np.zeros((k - 1, 2), int), [[1, 0]]]))
+        for f in range(nf):
+            p = pts if nf == 1 else pts + offs[f, 0] * D[:, :, 1] + offs[f, 1] * D[:, :, 2]
+            nodes.append(p)
+            els.append(chain + base)
+            img.append(np.r_[np.zeros((k - 1, 2), int), [[1, 0]]])
+            yarn_id.append(np.full(k, cid * nf + f))
+            crs.append(np.full(k, cid))
+            fil.append(np.full(k, f))
+            base += k
+    n_model = ym["filaments"]
+    rf = ym["filament_radius"]
+    if ym["model"] == "filaments" or n_model == 1:
+        radius, rc, bf, tf = (yarn.a, yarn.b), yarn.rc, yarn.bending_factor, yarn.torsion_factor
+    else:                          # one beam: area N A_f, rigidities N E I_f, N G J_f, the bundle's radius
+        r_area = rf * np.sqrt(n_model)
+        radius, rc = (r_area, r_area), ym["bundle_radius"]
+        bf, tf = yarn.bending_factor / n_model, yarn.torsion_factor / n_model
+    m = sum(len(e) for e in els)
+    frame = Frame(np.vstack(nodes), np.vstack(els), semi_axes=np.broadcast_to(radius, (m, 2)), E=yarn.E, nu=yarn.nu,
+                  yarn=np.concatenate(yarn_id), periods=periods, images=np.vstack(img), contact_radius=rc,
+                  bending_factor=bf, torsion_factor=tf, strain_limit=yarn.strain_limit)
+    return frame, np.concatenate(crs), np.concatenate(fil)
+
+
+def build_cell(parameters: dict, yarns: dict, resolution: dict) -> tuple:
+    """The ``weft_knit`` generator (see the module docstring): (Frame, info)."""
+    t = "parameters"
+    check_keys(parameters, KEYS, t)
+    pat = parse_notation(parameters.get("notation"), get_int(parameters, "needles", t, default=0, ge=1) or None)
+    name = get_str(parameters, "yarn", t, default=next(iter(yarns)) if len(yarns) == 1 else None)
+    if name not in yarns:
+        raise CellError(f"unknown yarn {name!r} (yarn tables: {', '.join(yarns)})", table=t, key="yarn")
+    yarn = yarns[name]
+    ym = _yarn_model(get_table(parameters, "yarn_model", t, required=False), yarn)
+    comp = _compression(get_table(parameters, "compression", t, required=False))
+    loop = get_number(parameters, "loop_length", t, gt=0)
+    rep = get_list(parameters, "repeat", t, shape=(2,), integer=True, default=[1, 1], gt=0)
+    rep = (int(rep[0]), int(rep[1]))
+    core = ym["bundle_radius"] - (comp.shell if comp is not None else 0.0)
+    if comp is not None and ym["model"] == "equivalent":
+        comp.check_radius(ym["bundle_radius"])
+    geo = knit_geometry(pat, loop, core_radius=core, wale_spacing=get_number(parameters, "wale_spacing", t, gt=0,
+                                                                             required=False),
+                        course_spacing=get_number(parameters, "course_spacing", t, gt=0, required=False))
+    r = resolution or {}
+    check_keys(r, ("element_length",), "resolution")
+    h = get_number(r, "element_length", "resolution", gt=0, default=loop / 10.0)
+    frame, course, fil = knit_frame(pat, geo, yarn, ym, h, rep)
+    # the polyline's chords are shorter than the curve: scale the geometry once so that the
+    # discretised yarn has the stitch length asked for
+    for _ in range(3):
+        got = float(frame.length[fil == 0].sum()) / (pat.stitches() * rep[0] * rep[1])
+        if abs(got / loop - 1.0) <= 1e-6:
+            break
+        geo = {k: (v * loop / got if k not in ("a",) else v) for k, v in geo.items()}
+        frame, course, fil = knit_frame(pat, geo, yarn, ym, h, rep)
+    ov = yarn_overlaps(frame) if frame.n_elements <= 20000 else np.zeros(0)
+    summary = overlap_summary(ov)
+    if len(ov):
+        log.info("weft knit cell: %s at creation (the relaxation resolves them%s)", summary,
+                 "; compressible shells overlap on purpose" if comp is not None else "")
+    info = {"pattern": pat, "geometry": geo, "yarn_model": ym, "compression": comp, "rest": straight_rest(frame),
+            "course": course, "filament": fil, "repeat": rep, "overlaps": summary, "n_overlaps": int(len(ov)),
+            "needles": pat.n_needles * rep[0], "courses": pat.n_courses * rep[1],
+            "stitches": pat.stitches() * rep[0] * rep[1], "loop_length": loop, "wale_vector": 1, "course_vector": 0,
+            "yarn_type": {int(y): name for y in np.unique(frame.yarn)},
+            "groups": {"front": _bed_mask(frame, geo, pat, rep, 1), "back": _bed_mask(frame, geo, pat, rep, -1)}}
+    return frame, info
+
+
+def _bed_mask(frame, geo, pat, rep, sign) -> np.ndarray:
+    """(m,) elements whose midpoint lies in a needle position of the bed ``sign`` knitting loops."""
+    x = frame.nodes[frame.elements[:, 0]] + 0.5 * frame.element_vectors
+    pos = np.floor(np.mod(x[:, 0], pat.n_needles * geo["pitch"]) / geo["pitch"]).astype(int) % pat.n_needles
+    beds = np.array([sign in pat.bed[:, i] for i in range(pat.n_needles)])
+    return beds[pos]

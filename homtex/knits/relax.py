@@ -1,0 +1,200 @@
+"""Relaxation of a weft-knit cell (``homtex.relax``): the generated loops of straight yarn let go.
+
+Protocol (stated, because dry friction gives a set of possible rest shapes and the relaxation
+path picks one): the cell of :mod:`homtex.geometry.knit_cell` starts from its generated geometry
+with the yarns straight at rest; the large-motion engine minimises the yarns' bending, twist and
+stretch with frictionless contact (compressible shells where the cell gives them: dry friction
+would freeze an arbitrary intermediate of the generated geometry), then lets the relaxed state
+settle with Coulomb friction (``friction``, default the cell file's), while the lattice is free in
+the fabric plane (course and wale spacing and shear; a1 stays along x and the fabric in the xy plane) and a take-down
+tension pulls along the wales: the paper's ``take_down`` (N, on its 5-needle specimen) per 5
+needles of the cell. One node is held in translation (the cell floats
+otherwise). The take-down acts from the start (a dead force on the wale lattice vector, as the
+knitting machine's take-down holds the fabric while it forms), and the generated loops let go in
+one quasi-static step: the energy the relaxation releases is what the solver takes out, and the
+ledger counts it exactly (:class:`~homtex.contact.incremental.NonlinearSettings`
+``stabilization="released"``: external work F x extension = released + stored changes).
+
+The result is a :class:`RelaxedCell`: the relaxed frame (nodes at their relaxed positions, the
+relaxed lattice, the rest state carried along), and ``attrs`` with the relaxed loop length, wale
+and course spacing, loop height and width against the input, the protocol and the solve's figures.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..contact.incremental import IncrementalSolver, NonlinearSettings
+from ..contact.ipc_system import serial_numba
+from ..contact.lattice import Lattice
+from ..contact.options import Contact
+from ..errors import InputError, SolverError
+from ..model.frame import Frame
+from ..validate import check_int, check_number
+
+log = logging.getLogger(__name__)
+
+__all__ = ["RelaxedCell", "relax"]
+
+#: needles of the paper's specimen, over which its take-down tension acts
+PAPER_NEEDLES = 5
+
+
+@dataclass
+class RelaxedCell:
+    """A relaxed weft-knit cell: ``cell`` (the source :class:`homtex.Cell`), ``frame`` (relaxed
+    nodes and lattice, for pictures and VTK), ``rest`` (the yarns' rest state seen from it),
+    ``state`` (the engine state on the cell's own frame that tests continue from: positions,
+    rotations, lattice, the pairs touching at creation), ``attrs`` (loop length, wale and course
+    spacing, loop height and width: relaxed and as generated, mm; the protocol)."""
+
+    cell: object
+    frame: Frame
+    rest: object
+    state: object = None
+    attrs: dict = field(default_factory=dict)
+
+    @property
+    def info(self) -> dict:
+        return self.cell.info
+
+    @property
+    def name(self) -> str:
+        return self.cell.name
+
+    def cell_attrs(self) -> dict:
+        return self.cell.attrs()
+
+
+def knit_info(cell) -> dict:
+    """The knit cell's info (InputError for cells of another generator)."""
+    info = getattr(cell, "info", None)
+    if not isinstance(info, dict) or "rest" not in info or "pattern" not in info:
+        raise InputError(f"{getattr(cell, 'name', cell)!r} is not a weft-knit cell (generator 'weft_knit'); relax and "
+                         "tensile take the cells of homtex.load_cell('cells/rib_1x1_eglass.toml') and the like")
+    return info
+
+
+def cell_friction(cell, friction) -> float:
+    """The friction coefficient: ``friction``, else the cell file's [contact] friction, else 0."""
+    if friction is not None:
+        return check_number(friction, "friction", ge=0.0, le=10.0)
+    return float(getattr(cell, "contact", {}).get("friction", 0.0))
+
+
+def loop_measures(frame: Frame, x: np.ndarray, periods: np.ndarray, info: dict) -> dict:
+    """Loop length (yarn length per stitch), wale spacing (between wales of one bed), course
+    spacing, and the mean loop height and width (y and x extent of each knitted loop's yarn), mm."""
+    pat = info["pattern"]
+    rep = info["repeat"]
+    ym = info["yarn_model"]
+    course = info["course"]
+    fil = info["filament"]
+    el = frame.elements
+    vec = x[el[:, 1]] + frame.images @ periods - x[el[:, 0]]
+    L = np.linalg.norm(vec, axis=1)
+    centre = fil == (0 if ym["model"] == "equivalent" else 0)
+    loop = float(L[centre].sum() / info["stitches"])
+    beds = 2 if (np.any(pat.bed > 0) and np.any(pat.bed < 0)) else 1
+    wales_per_bed = max(1, pat.n_needles * rep[0] // beds)
+    hts, wds = [], []
+    N = pat.n_needles * rep[0]
+    for c in np.unique(course):
+        e = np.flatnonzero((course == c) & centre)
+        n = len(e)
+        j = int(c) % pat.n_courses
+        pts = x[el[e, 0]]
+        # unwrap the chain so that a loop crossing the cell boundary stays whole
+        steps = np.vstack([np.zeros(3), np.cumsum(vec[e][:-1], axis=0)])
+        pts = pts[0] + steps
+        for i in range(N):
+            if pat.action[j, i % pat.n_needles] != "knit":
+                continue
+            seg = pts[int(i * n / N):int((i + 1) * n / N)]
+            hts.append(np.ptp(seg[:, 1]))
+            wds.append(np.ptp(seg[:, 0]))
+    return {"loop_length": loop, "wale_spacing": float(np.linalg.norm(periods[0]) / wales_per_bed),
+            "course_spacing": float(np.linalg.norm(periods[1]) / (pat.n_courses * rep[1])),
+            "loop_height": float(np.mean(hts)), "loop_width": float(np.mean(wds))}
+
+
+def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000, tol: float = 1e-8) -> RelaxedCell:
+    """Relax a weft-knit cell (see the module docstring).
+
+    Parameters
+    ----------
+    cell : a weft-knit :class:`homtex.Cell` (``homtex.load_cell("cells/rib_1x1_eglass.toml")``).
+    friction : Coulomb coefficient between yarns (default: the cell file's ``[contact] friction``).
+    take_down : take-down tension on the paper's 5-needle specimen, N (0.06 N in the paper), applied
+        per 5 needles of the cell along the wales.
+    max_iter : Newton iterations of the relaxation (it takes the generated loops far).
+    tol : equilibrium tolerance, relative to the forces.
+
+    Returns a :class:`RelaxedCell`; SolverError if the relaxation fails at every step size.
+    """
+    if isinstance(cell, RelaxedCell):
+        return cell
+    info = knit_info(cell)
+    take_down = check_number(take_down, "take_down (N)", ge=0.0, le=1e6)
+    mu = cell_friction(cell, friction)
+    t0 = time.process_time()
+    frame = cell.frame
+    force = take_down * info["needles"] / PAPER_NEEDLES
+    lat = Lattice(free=((0, 0), (1, 0), (1, 1)), force={(1, 1): force} if force > 0 else {})
+    settings = NonlinearSettings(stabilization="released", max_iter=check_int(max_iter, "max_iter", ge=1),
+                                 tol=check_number(tol, "tol", gt=0.0, lt=1.0))
+    # frictionless release (dry friction would freeze an arbitrary intermediate of the generated
+    # geometry), then the state settles with the cell's friction (its contacts stick where they are)
+    sol = _release(cell, frame, info, lat, settings, Contact(friction=0.0, compression=info["compression"]), None)
+    iters = sol.info.iterations
+    stable = bool(sol.info.negative_eigenvalues == 0)
+    if mu > 0:
+        sol = _release(cell, frame, info, lat, settings, Contact(friction=mu, compression=info["compression"]),
+                       sol.export_state())
+        iters += sol.info.iterations
+    x, Q, P = sol.positions.copy(), sol.cor.Q.copy(), sol.lat.periods.copy()
+    energy = float(sol.cor.energy.sum())
+    before = loop_measures(frame, frame.nodes, frame.periods, info)
+    after = loop_measures(frame, x, P, info)
+    new = Frame(x, frame.elements, periods=P, images=frame.images, **frame.element_fields())
+    rest = info["rest"].moved(Q, frame.elements)
+    attrs = {f"relaxed_{k}_mm": v for k, v in after.items()}
+    attrs.update({f"generated_{k}_mm": v for k, v in before.items()})
+    attrs.update(loop_length_mm=after["loop_length"], wale_spacing_mm=after["wale_spacing"],
+                 course_spacing_mm=after["course_spacing"], input_loop_length_mm=float(info["loop_length"]),
+                 friction=mu, take_down_N=float(take_down), take_down_on_cell_N=float(force),
+                 protocol=("generated loops of straight yarn released frictionless with contact"
+                           f"{' (compressible shells)' if info['compression'] is not None else ''}, lattice free in "
+                           f"the fabric plane, take-down {take_down:g} N per {PAPER_NEEDLES} needles acting along "
+                           f"the wales from the start, one node held; then settled with friction {mu:g}"),
+                 status="ok" if abs(sol.balance()) <= 0.01 else "flagged",
+                 released_energy_Nmm=float(sol.ledger["stabilization"]), energy_balance=float(sol.balance()),
+                 take_down_work_Nmm=float(sol.ledger["external_work"]), newton_iterations=int(iters),
+                 cpu_seconds=time.process_time() - t0, strain_energy_Nmm=energy,
+                 stable=stable)
+    log.info("relax %s: loop length %.4g mm (input %.4g), wale spacing %.4g mm, course spacing %.4g mm, %d Newton "
+             "iterations, %.1f s CPU", cell.name, after["loop_length"], info["loop_length"], after["wale_spacing"],
+             after["course_spacing"], attrs["newton_iterations"], attrs["cpu_seconds"])
+    return RelaxedCell(cell=cell, frame=new, rest=rest, state=sol.export_state(), attrs=attrs)
+
+
+def _release(cell, frame, info, lat, settings, contact, initial) -> IncrementalSolver:
+    """One quasi-static step from the generated (or an earlier) state to equilibrium with the
+    take-down acting throughout; the ledger counts the energy released (continued: added to it)."""
+    sol = IncrementalSolver(frame, {0: [0, 1, 2]}, None, [], contact, rest=info["rest"], lattice=lat,
+                            settings=settings, initial=initial)
+    sol.load_scale = 1.0            # the take-down acts from the start: its work is F x the cell's extension
+    if initial is None:
+        sol._start_ledger()
+    else:
+        sol._react = sol._reactions(sol._evaluate(sol.positions, [], hessian=False))
+    with serial_numba(sol.small):
+        try:
+            sol.solve(loads=1.0)
+        except SolverError as err:
+            raise SolverError(f"relax {cell.name}: the generated loops did not reach equilibrium ({err})") from None
+    return sol
