@@ -35,17 +35,18 @@ import logging
 
 import numpy as np
 
+from ..contact.exclusions import arc_exclusions
 from ..errors import CellError
 from ..model.compression import YarnCompression
 from ..model.frame import Frame
 from ..model.rest import node_frames, straight_rest
 from ..validate import check_keys, get_int, get_list, get_number, get_str, get_table
-from .curves import overlap_summary, yarn_overlaps
+from .curves import segment_distances
 from .weft_knit import course_curve, hex_offsets, knit_geometry, parse_notation, resample
 
 log = logging.getLogger(__name__)
 
-__all__ = ["build_cell", "knit_frame"]
+__all__ = ["build_cell", "creation_overlaps", "knit_frame"]
 
 KEYS = ("notation", "needles", "loop_length", "wale_spacing", "course_spacing", "repeat", "yarn", "yarn_model",
         "compression", "take_down_needles")
@@ -175,13 +176,14 @@ def build_cell(parameters: dict, yarns: dict, resolution: dict) -> tuple:
             break
         geo = {k: (v * loop / got if k not in ("a",) else v) for k, v in geo.items()}
         frame, course, fil = knit_frame(pat, geo, yarn, ym, h, rep)
-    ov = yarn_overlaps(frame) if frame.n_elements <= 20000 else np.zeros(0)
-    summary = overlap_summary(ov)
-    if len(ov):
+    ov = creation_overlaps(frame, core=None if comp is None else frame.contact_radius - comp.shell)
+    summary = ov["summary"]
+    if ov["count"]:
         log.info("weft knit cell: %s at creation (the relaxation resolves them%s)", summary,
                  "; compressible shells overlap on purpose" if comp is not None else "")
     info = {"pattern": pat, "geometry": geo, "yarn_model": ym, "compression": comp, "rest": straight_rest(frame),
-            "course": course, "filament": fil, "repeat": rep, "overlaps": summary, "n_overlaps": int(len(ov)),
+            "course": course, "filament": fil, "repeat": rep, "overlaps": summary, "n_overlaps": ov["count"],
+            "n_core_overlaps": ov["core_count"], "deepest_overlap_mm": ov["deepest"],
             "needles": pat.n_needles * rep[0], "courses": pat.n_courses * rep[1],
             "stitches": pat.stitches() * rep[0] * rep[1], "loop_length": loop, "wale_vector": 1, "course_vector": 0,
             "yarn_type": {int(y): name for y in np.unique(frame.yarn)},
@@ -195,3 +197,71 @@ def _bed_mask(frame, geo, pat, rep, sign) -> np.ndarray:
     pos = np.floor(np.mod(x[:, 0], pat.n_needles * geo["pitch"]) / geo["pitch"]).astype(int) % pat.n_needles
     beds = np.array([sign in pat.bed[:, i] for i in range(pat.n_needles)])
     return beds[pos]
+
+
+def creation_overlaps(frame: Frame, *, core=None, tol: float = 1e-9) -> dict:
+    """Overlaps of the yarn surfaces in a generated knit cell, periodic images included.
+
+    A course meets copies of itself across the wale lattice vector (a jersey cell has one yarn
+    that interlocks with its own image), so same-yarn pairs are told apart by image: a pair is
+    left out only where the engine leaves it out (:func:`~homtex.contact.exclusions.arc_exclusions`:
+    elements sharing a node, or of one yarn closer than 3 r along it, at that image).
+
+    Parameters
+    ----------
+    frame : the cell's Frame (2-periodic). core : (m,) hard-core radii (mm) of compressible yarns,
+        to count the pairs whose cores overlap too (None: no shells). tol : depth below which a
+        pair touches rather than overlaps, mm.
+
+    Returns {"count", "deepest" (mm), "core_count", "summary" (one line), "pairs" ((q, 2) elements,
+    deepest first), "depth" (q,) mm}.
+    """
+    from scipy.spatial import cKDTree
+
+    el, d, rc, L = frame.elements, frame.element_vectors, frame.contact_radius, frame.length
+    x0 = frame.nodes[el[:, 0]]
+    m, k = len(el), frame.dim_periodic
+    imgs = np.array(np.meshgrid(*[[-1, 0, 1]] * k, indexing="ij")).reshape(k, -1).T.astype(np.int64)
+    h = max(2.0 * float(rc.max()), float(L.mean()) / 4.0)
+    per = np.maximum(1, np.ceil(L / h)).astype(np.int64)
+    owner = np.repeat(np.arange(m), per)
+    frac = (np.arange(len(owner)) - (np.cumsum(per) - per)[owner] + 0.5) / per[owner]
+    pts = x0[owner] + frac[:, None] * d[owner]
+    tree = cKDTree(pts)
+    # image codes (base 3 per lattice vector) of the exclusions, keyed with the element pair
+    ptr, ex_e, ex_i = arc_exclusions(frame)
+    base = 3 ** np.arange(k)
+    ok = np.all(np.abs(ex_i) <= 1, axis=1)
+    ex_src = np.repeat(np.arange(m), np.diff(ptr))[ok]
+    excluded = (ex_src * m + ex_e[ok]) * 3 ** k + (ex_i[ok] + 1) @ base
+    a_all, b_all, q_all = [], [], []
+    for q, img in enumerate(imgs):
+        sdm = tree.sparse_distance_matrix(cKDTree(pts + img @ frame.periods), h + 2.0 * float(rc.max()),
+                                          output_type="coo_matrix")
+        a, b = owner[sdm.row], owner[sdm.col]
+        key = np.unique(a * m + b)
+        a, b = key // m, key % m
+        keep = ~np.isin((a * m + b) * 3 ** k + (img + 1) @ base, excluded)
+        # each unordered pair once: a < b at any image, a == b at a "positive" image
+        first = next((int(v) for v in img if v != 0), 0)
+        keep &= (a < b) | ((a == b) & (first > 0))
+        a_all.append(a[keep])
+        b_all.append(b[keep])
+        q_all.append(np.full(int(keep.sum()), q))
+    a, b, q = np.concatenate(a_all), np.concatenate(b_all), np.concatenate(q_all)
+    dist, _, _ = segment_distances(x0[a], d[a], x0[b] + imgs[q] @ frame.periods, d[b])
+    depth = rc[a] + rc[b] - dist
+    hit = depth > tol
+    a, b, depth, dist = a[hit], b[hit], depth[hit], dist[hit]
+    order = np.argsort(-depth, kind="stable")
+    a, b, depth, dist = a[order], b[order], depth[order], dist[order]
+    n_core = 0 if core is None else int(np.count_nonzero(core[a] + core[b] - dist > tol))
+    if len(a) == 0:
+        summary = "no overlaps"
+    else:
+        summary = (f"{len(a)} overlapping segment pairs, deepest {depth[0]:.4g} mm between elements {a[0]} and "
+                   f"{b[0]} (yarns {frame.yarn[a[0]]} and {frame.yarn[b[0]]})")
+        if core is not None:
+            summary += f"; {n_core} of them with overlapping hard cores"
+    return {"count": int(len(a)), "deepest": float(depth[0]) if len(a) else 0.0, "core_count": n_core,
+            "summary": summary, "pairs": np.column_stack([a, b]), "depth": depth}
