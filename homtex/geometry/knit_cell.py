@@ -49,7 +49,7 @@ log = logging.getLogger(__name__)
 __all__ = ["build_cell", "creation_overlaps", "knit_frame"]
 
 KEYS = ("notation", "needles", "loop_length", "wale_spacing", "course_spacing", "repeat", "yarn", "yarn_model",
-        "compression", "take_down_needles")
+        "compression")
 MODEL_KEYS = ("filaments", "model", "packing", "gap", "density", "failure_stress")
 COMP_KEYS = ("travel", "force", "diameter", "core_fraction", "contact_length", "shell", "stiffness", "exponent",
              "source")

@@ -5,6 +5,10 @@ Both start from the relaxed cell (:func:`homtex.relax`; its protocol is in the r
 The periodic cell: the lattice vector along the test direction (wales: a2, y; courses: a1, x) is
 stretched by ``strain`` x its relaxed length in ``steps`` levels, the other in-plane components
 are free (zero average force: lateral contraction and shear), one node is held in translation.
+Along the wales the relaxation's take-down stays with the stretched vector (the force starts at
+it); along the courses the take-down is let go first (the wales then carry no force; the energy
+that releases is ``take_down_released_Nmm`` in the attrs) and the gauge length is the cell's
+length after that.
 The force is the generalised force on the stretched component, the force the cell carries across
 its boundary (N per cell); divided by the relaxed cell width it is the fabric's force per unit
 width (N/mm). A finite specimen (:mod:`.specimen`) is pulled by its top grip.
@@ -31,6 +35,7 @@ import numpy as np
 from ..analysis.energy import ledger_check
 from ..contact.engine import EngineStepper
 from ..contact.incremental import IncrementalSolver, NonlinearSettings
+from ..contact.ipc_system import serial_numba
 from ..contact.lattice import Lattice
 from ..contact.options import Contact
 from ..errors import InputError, SolverError
@@ -159,17 +164,20 @@ def tensile(cell, *, strain, direction: str = "wale", specimen="cell", steps: in
 
 def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_positions, tol):
     t0 = time.process_time()
-    P0 = relaxed.frame.periods.copy()
     w = 1 - v
-    L0, width0 = float(P0[v, v]), float(np.linalg.norm(P0[w]))
     free = [(0, 0), (1, 0), (1, 1)]
     free.remove((v, v))
-    # the take-down tension of the relaxation stays on the wales (a course test); pulled along the
-    # wales, the stretch carries it (the force starts at it)
-    td = relaxed.attrs["take_down_on_cell_N"]
-    lat = Lattice(free=tuple(free), motion={(v, v): strain * L0}, force={(1, 1): td} if v == 0 and td > 0 else {})
     contact = Contact(friction=mu, compression=info["compression"])
-    sol = continue_from(relaxed, info, {0: [0, 1, 2]}, contact, lat, tol)
+    # pulled along the wales, the stretch carries the relaxation's take-down (the force starts at
+    # it); pulled along the courses, the wales carry no force: the take-down is let go first, the
+    # courses held at their relaxed length (the energy that releases is counted in the attrs)
+    state, released = relaxed.state, 0.0
+    if v == 0 and relaxed.attrs["take_down_on_cell_N"] > 0:
+        state, released = _let_go(relaxed, info, contact, ((0, 0), (1, 0), (1, 1)), tol)
+    P0 = state.periods.copy()
+    L0, width0 = float(P0[v, v]), float(np.linalg.norm(P0[w]))
+    lat = Lattice(free=tuple(free), motion={(v, v): strain * L0})
+    sol = continue_from(relaxed, info, {0: [0, 1, 2]}, contact, lat, tol, state=state)
     stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam, loads=1.0), max_cuts=10, refine=0.003)
     rec = _Recorder(sol, info, info["yarn_model"].get("failure_stress"))
     pos, ee = [], []
@@ -198,6 +206,7 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
     bar.close()
     attrs = _attrs(relaxed, info, "periodic cell, macro stretch with free lateral contraction", v, mu, L0, width0,
                    steps, sol, t0)
+    attrs["take_down_released_Nmm"] = released
     ds = rec.dataset(attrs)
     if keep_positions:
         _positions(ds, pos, ee)
@@ -211,16 +220,33 @@ def settings(info, tol: float, **kw) -> NonlinearSettings:
     return NonlinearSettings(tol=tol, **kw)
 
 
-def continue_from(relaxed: RelaxedCell, info, fixed, contact, lattice, tol: float = 1e-8) -> IncrementalSolver:
-    """The engine on the cell's frame at the relaxed state (positions, rotations, lattice, the pairs
-    touching at creation), the lattice's dead forces acting from the start, its ledger started
-    afresh there."""
+def continue_from(relaxed: RelaxedCell, info, fixed, contact, lattice, tol: float = 1e-8, state=None
+                  ) -> IncrementalSolver:
+    """The engine on the cell's frame at the relaxed state (or ``state``, an EngineState of that
+    frame: positions, rotations, lattice, the pairs touching at creation), the lattice's dead
+    forces acting from the start, its ledger started afresh there."""
     sol = IncrementalSolver(relaxed.cell.frame, fixed, None, [], contact, rest=info["rest"], lattice=lattice,
-                            settings=settings(info, tol), initial=relaxed.state)
+                            settings=settings(info, tol), initial=relaxed.state if state is None else state)
     sol.delta = sol.s.delta0
     sol.load_scale = 1.0
     sol._start_ledger()
     return sol
+
+
+def _let_go(relaxed: RelaxedCell, info, contact, free, tol) -> tuple:
+    """(EngineState, energy released N mm): the relaxed cell with its take-down removed, the
+    courses held at their relaxed length and the ``free`` lattice components free of force."""
+    sol = IncrementalSolver(relaxed.cell.frame, {0: [0, 1, 2]}, None, [], contact, rest=info["rest"],
+                            lattice=Lattice(free=free), settings=settings(info, tol, stabilization="released"),
+                            initial=relaxed.state)
+    before = float(sol.ledger["stabilization"])
+    with serial_numba(sol.small):
+        try:
+            sol.solve(motion=0.0)
+        except SolverError as err:
+            raise SolverError(f"tensile {relaxed.name}: the relaxed cell did not settle without its take-down "
+                              f"({err})") from None
+    return sol.export_state(), float(sol.ledger["stabilization"]) - before
 
 
 def _attrs(relaxed, info, what, v, mu, L0, width0, steps, sol, t0) -> dict:
