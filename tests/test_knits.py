@@ -1,7 +1,11 @@
-"""Weft-knitted fabrics: notation -> cell (bad notations named by course and needle, the loop model
-and its stitch length), relaxation (its ledger closes, the yarn keeps its length, a rib contracts
-across its wales), the periodic tensile test (J-shaped, lateral contraction, the ledger, bending
-dominating the energy split) and the m / l^3 law where it must hold exactly."""
+"""Weft-knitted fabrics: notation -> cell (bad notations named by course and needle, Crane's loop
+curve at the loop length, overlaps at creation told apart by periodic image, a 2 x 2 supercell
+storing 4x the cell's energy), relaxation (the released energy is the stored energy's decrease
+plus the take-down's work, the yarn keeps its length, a 1x1 rib pulls its wales together), the
+periodic tensile test (J-shaped along the wales, lateral contraction, the ledger within 1 %
+frictionless and with friction 0.5, bending dominating the energy split, filaments beyond the
+failure stress flagged, zero force across a course test) and the m / l^3 law where it must hold
+exactly. Small cells and few steps: the whole module stays within ~20 s of CPU."""
 
 import numpy as np
 import pytest
@@ -12,14 +16,15 @@ from homtex.geometry.weft_knit import CRANE, course_curve, knit_geometry, parse_
 from homtex.knits.scaling import scaled_cell, xcf
 
 CELLS = ("rib_1x1_eglass", "jersey_eglass", "milano_eglass", "rib_1x1_acrylic", "jersey_acrylic")
+GEO = ("pitch", "c", "h", "d", "Z0", "a")
 
 
 @pytest.mark.parametrize("name", CELLS)
-def test_the_shipped_knit_cells_load(name):
+def test_the_shipped_knit_cells_load_with_the_loop_length_asked_for(name):
     cell = homtex.load_cell(f"cells/{name}.toml")
     assert cell.frame.dim_periodic == 2 and cell.info["stitches"] >= 1
     L = cell.frame.length[cell.info["filament"] == 0].sum() / cell.info["stitches"]
-    assert L == pytest.approx(cell.parameters["loop_length"], rel=5e-3)
+    assert L == pytest.approx(cell.parameters["loop_length"], rel=1e-6)
 
 
 @pytest.mark.parametrize("courses, needles, match", [
@@ -44,6 +49,12 @@ def test_a_loop_too_short_to_close_is_named():
         knit_geometry(pat, 5.0, core_radius=0.01, wale_spacing=8.0, course_spacing=3.0)
 
 
+def test_a_bad_cell_key_names_its_table():
+    cell = homtex.load_cell("cells/jersey_eglass.toml")
+    with pytest.raises(CellError, match="parameters.yarn_model"):
+        cell.replace(**{"parameters.yarn_model.filament": 3})
+
+
 def test_the_loop_model_is_crane_plain_knit_curve_at_the_loop_length():
     """Jersey: x = lambda (t + 3/2 sin 2t), y = h cos t, z = -d cos 2t with Crane's h = 4, d = 1,
     course spacing 4.5 (lambda = 1), scaled so that one loop is as long as asked."""
@@ -51,60 +62,142 @@ def test_the_loop_model_is_crane_plain_knit_curve_at_the_loop_length():
     g = knit_geometry(pat, 12.0, core_radius=0.01)
     lam = g["pitch"] / (2 * np.pi)
     assert g["h"] == pytest.approx(CRANE["h"] * lam) and g["c"] == pytest.approx(CRANE["c"] * lam)
-    cur = course_curve(pat, 0, **{k: g[k] for k in ("pitch", "c", "h", "d", "Z0", "a")}, samples=64)
+    cur = course_curve(pat, 0, **{k: g[k] for k in GEO}, samples=64)
     t = -np.pi + 2 * np.pi * np.arange(64) / 64
     ref = np.c_[g["pitch"] / 2 + lam * (t + 1.5 * np.sin(2 * t)), CRANE["h"] * lam * np.cos(t),
                 -CRANE["d"] * lam * np.cos(2 * t)]
     assert np.abs(cur - ref).max() < 1e-12
-    assert stitch_length(pat, **{k: g[k] for k in ("pitch", "c", "h", "d", "Z0", "a")}) == pytest.approx(12.0)
-    assert xcf(6.0, 1.54) == pytest.approx(1.643, abs=1e-3)
+    assert stitch_length(pat, **{k: g[k] for k in GEO}) == pytest.approx(12.0)
+    assert xcf(6.0, 1.54) == pytest.approx(6.0 / 1.54 ** 3)
 
 
+def test_overlaps_at_creation_count_a_course_against_its_own_image():
+    """The acrylic jersey (2.66 mm yarn, compressible) overlaps the copy of its one course across
+    the wale vector by 2 r - 2 x the loop model's clear radius (half the closest approach of two
+    courses); the hard cores stay clear. A thin E-glass yarn overlaps nothing."""
+    cell = homtex.load_cell("cells/jersey_acrylic.toml")
+    info = cell.info
+    r = float(cell.frame.contact_radius[0])
+    assert info["n_overlaps"] > 0 and info["n_core_overlaps"] == 0
+    assert info["deepest_overlap_mm"] == pytest.approx(2 * r - 2 * info["geometry"]["clear_radius"], rel=0.03)
+    assert homtex.load_cell("cells/jersey_eglass.toml").info["n_overlaps"] == 0
+
+
+def test_a_2x2_supercell_stores_four_times_the_cells_energy():
+    cell = homtex.load_cell("cells/jersey_eglass.toml")
+    big = cell.replace(**{"parameters.repeat": [2, 2]})
+    assert big.frame.n_elements == 4 * cell.frame.n_elements
+    U = []
+    for c in (cell, big):
+        cor = homtex.Corotational(c.frame, geometric="consistent", rest=c.info["rest"])
+        cor.evaluate()
+        U.append(cor.energy.sum(axis=0))
+    assert U[1] == pytest.approx(4 * U[0], rel=1e-9)
+    assert U[0][2] + U[0][3] > 0.9 * U[0].sum()          # a loop of straight yarn stores bending
+
+
+# ------------------------------------------------------------------------------ relaxation
 @pytest.fixture(scope="module")
-def rib():
-    return homtex.relax(homtex.load_cell("cells/rib_1x1_eglass.toml"))
+def jersey():
+    """The E-glass jersey relaxed to 1e-12 (the scaling law compares two of them to 1e-8); its
+    failure stress lowered to 3 MPa so that the wale test below passes it."""
+    cell = homtex.load_cell("cells/jersey_eglass.toml").replace(**{"parameters.yarn_model.failure_stress": 3.0})
+    return homtex.relax(cell, tol=1e-12)
 
 
-def test_the_rib_relaxes_with_a_closed_ledger_and_contracts_across_its_wales(rib):
-    a = rib.attrs
-    assert a["status"] == "ok" and abs(a["energy_balance"]) < 1e-9 and a["stable"]
-    assert a["loop_length_mm"] == pytest.approx(a["input_loop_length_mm"], rel=2e-3)     # the yarn keeps its length
-    assert a["wale_spacing_mm"] < 0.5 * a["generated_wale_spacing_mm"]                  # a rib pulls its wales in
-    assert a["released_energy_Nmm"] > 0 and a["strain_energy_Nmm"] > 0
-    assert rib.frame.periods[0, 0] == pytest.approx(a["wale_spacing_mm"])
+def test_the_relaxed_jersey_released_its_stored_energy_and_kept_its_yarn_length(jersey):
+    """What the solver counts as released iteration by iteration equals the end states' stored
+    energy difference plus the take-down's work (computed here from the generated frame)."""
+    a, cell = jersey.attrs, jersey.cell
+    cor = homtex.Corotational(cell.frame, geometric="consistent", rest=cell.info["rest"])
+    cor.evaluate()
+    U0 = float(cor.energy.sum())
+    wale_extension = jersey.frame.periods[1, 1] - cell.frame.periods[1, 1]
+    W = a["take_down_on_cell_N"] * wale_extension
+    released = U0 + a["generated_contact_energy_Nmm"] - a["strain_energy_Nmm"] - a["contact_energy_Nmm"] + W
+    assert a["released_energy_Nmm"] == pytest.approx(released, rel=1e-6)
+    assert a["status"] == "ok" and a["stable"] and 0 < a["strain_energy_Nmm"] < U0
+    assert a["take_down_N"] == 0.06 and a["take_down_on_cell_N"] == pytest.approx(0.06 / 5)
+    assert a["loop_length_mm"] == pytest.approx(a["input_loop_length_mm"], rel=1e-3)   # EA >> the forces
+    for k in ("loop_height_mm", "loop_width_mm", "wale_spacing_mm", "course_spacing_mm"):
+        assert a[f"relaxed_{k}"] > 0 and a[f"generated_{k}"] > 0
+    assert jersey.frame.periods[0, 0] == pytest.approx(a["wale_spacing_mm"])
 
 
-def test_the_periodic_rib_pulled_along_the_wales(rib):
-    ds = homtex.tensile(rib, strain=0.1, direction="wale", steps=5)
-    assert ds.attrs["status"] in ("ok", "flagged")
-    assert np.abs(ds.energy_balance.values).max() < 0.02
+def test_a_1x1_rib_pulls_its_wales_together():
+    """A 1x1 rib relaxes to far less than its knitted width (its front and back wales close up);
+    coarse elements keep this test cheap."""
+    cell = homtex.load_cell("cells/rib_1x1_eglass.toml").replace(**{"resolution.element_length": 0.65})
+    a = homtex.relax(cell).attrs
+    assert a["status"] == "ok" and a["stable"]
+    assert a["wale_spacing_mm"] < 0.5 * a["generated_wale_spacing_mm"]
+    assert a["loop_length_mm"] == pytest.approx(a["input_loop_length_mm"], rel=1e-3)
+
+
+# ------------------------------------------------------------------------------ tensile
+@pytest.fixture(scope="module")
+def wale(jersey):
+    return homtex.tensile(jersey, strain=0.2, direction="wale", steps=2)
+
+
+def test_the_jersey_pulled_along_the_wales_is_j_shaped_and_contracts(wale):
+    ds = wale
+    assert ds.attrs["status"] == "ok" and np.abs(ds.energy_balance.values).max() < 0.01
     f = ds.force.values
-    assert f[0] == pytest.approx(rib.attrs["take_down_on_cell_N"]) and np.all(np.diff(f) > 0)   # from the take-down on
+    assert f[0] == pytest.approx(0.06 / 5)                             # the take-down it was relaxed under
+    assert f[2] - f[1] > f[1] - f[0] > 0                               # stiffening
+    assert np.all(np.diff(ds.width.values) < 0)                        # free lateral contraction
     assert ds.force_per_width.values == pytest.approx(f / ds.attrs["initial_width_mm"])
-    assert ds.width.values[-1] < ds.width.values[0]                                      # free lateral contraction
+    assert ds.extension.values[-1] == pytest.approx(0.2 * ds.attrs["gauge_length_mm"])
+    # the external work lies between the lower and upper sums of the rising force over the extension
+    dx = np.diff(ds.extension.values)
+    assert f[:-1] @ dx < ds.external_work.values[-1] < f[1:] @ dx
     bend = ds.bending_y + ds.bending_z
     assert np.all(bend.values > 10 * ds.axial.values) and np.all(bend.values > 10 * ds.torsion.values)
-    assert ds.extension.values[-1] == pytest.approx(0.1 * ds.attrs["gauge_length_mm"])
     for v in ("force", "force_per_width", "width", "extension", "axial", "contact_energy", "max_filament_stress"):
         assert ds[v].attrs["units"] and ds[v].attrs["long_name"]
 
 
-def test_the_m_over_l_cubed_law_holds_exactly_for_a_similar_cell():
-    """Every length x b, bending rigidity x a (EA and kGA x a / b^2, GJ x a): the force at the same
-    strain x a / b^2 (1e-8), the take-down scaled alike; at the same extension in mm the linear
-    force x a / b^3."""
-    cell = homtex.load_cell("cells/jersey_eglass.toml")
+def test_filaments_beyond_the_failure_stress_are_flagged(wale):
+    s, flag = wale.max_filament_stress.values, wale.beyond_failure_stress.values
+    assert np.array_equal(flag, s > 3.0) and flag.any() and not flag.all()
+    assert wale.attrs["first_failure_strain"] == pytest.approx(float(wale.strain[np.argmax(flag)]))
+
+
+def test_the_jersey_pulled_along_the_courses_carries_no_force_across(jersey):
+    """The take-down is let go first: the test starts at zero force and the wales contract."""
+    ds = homtex.tensile(jersey, strain=0.05, direction="course", steps=1)
+    assert ds.attrs["status"] == "ok" and abs(float(ds.energy_balance[-1])) < 0.01
+    assert ds.attrs["take_down_released_Nmm"] > 0
+    f = ds.force.values
+    assert abs(f[0]) < 1e-6 * f[1] and f[1] > 0
+    assert ds.width.values[1] < ds.width.values[0]
+
+
+def test_with_friction_the_ledger_still_closes_and_the_fabric_is_stiffer(jersey, wale):
+    ds = homtex.tensile(jersey, strain=0.025, direction="wale", steps=1, friction=0.5)
+    assert ds.attrs["status"] == "ok" and ds.attrs["friction"] == 0.5
+    W, D = float(ds.external_work[-1]), float(ds.friction_energy[-1])
+    assert 0.05 * W < D < W and abs(float(ds.energy_balance[-1])) < 0.01
+    # frictionless, the force at 2.5 % is below the 10 % level of the wale test
+    assert float(ds.force[-1]) > float(wale.force[1])
+
+
+def test_the_m_over_l_cubed_law_holds_exactly_for_a_similar_cell(jersey):
+    """Every length x b, bending rigidity x a (EA and kGA x a / b^2, GJ x a), the take-down x a / b^2:
+    relaxed spacings x b, energies x a / b, the force at the same strain x a / b^2 (1e-8); at the
+    same extension in mm the force x a / b^3."""
     a, b = 6.0, 1.54
-    big = scaled_cell(cell, length=b, bending=a)
-    r0 = homtex.relax(cell, tol=1e-12)
+    big = scaled_cell(jersey.cell, length=b, bending=a)
     r1 = homtex.relax(big, take_down=0.06 * a / b ** 2, tol=1e-12)
-    assert r1.attrs["wale_spacing_mm"] == pytest.approx(b * r0.attrs["wale_spacing_mm"], rel=1e-8)
-    d0 = homtex.tensile(r0, strain=0.02, direction="course", steps=2, tol=1e-12)
-    d1 = homtex.tensile(r1, strain=0.02, direction="course", steps=2, tol=1e-12)
-    assert d1.force.values[1:] == pytest.approx(d0.force.values[1:] * a / b ** 2, rel=1e-8)
+    assert r1.attrs["wale_spacing_mm"] == pytest.approx(b * jersey.attrs["wale_spacing_mm"], rel=1e-8)
+    assert r1.attrs["strain_energy_Nmm"] == pytest.approx(a / b * jersey.attrs["strain_energy_Nmm"], rel=1e-8)
+    d0 = homtex.tensile(jersey, strain=0.02, direction="wale", steps=1, tol=1e-12)
+    d1 = homtex.tensile(r1, strain=0.02, direction="wale", steps=1, tol=1e-12)
+    assert d1.force.values == pytest.approx(d0.force.values * a / b ** 2, rel=1e-8)
     k0 = (d0.force.values[1] - d0.force.values[0]) / d0.extension.values[1]
     k1 = (d1.force.values[1] - d1.force.values[0]) / d1.extension.values[1]
-    assert k1 == pytest.approx(k0 * xcf(a, b), rel=1e-8)
+    assert k1 == pytest.approx(k0 * xcf(a, b), rel=1e-6)
     e0 = sum(float(d0[k][-1]) for k in ("axial", "torsion", "bending_y", "bending_z", "shear"))
     e1 = sum(float(d1[k][-1]) for k in ("axial", "torsion", "bending_y", "bending_z", "shear"))
     assert e1 == pytest.approx(e0 * a / b, rel=1e-8)

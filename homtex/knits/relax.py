@@ -175,6 +175,8 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
                  released_energy_Nmm=float(sol.ledger["stabilization"]), energy_balance=float(sol.balance()),
                  take_down_work_Nmm=float(sol.ledger["external_work"]), newton_iterations=int(iters),
                  cpu_seconds=time.process_time() - t0, strain_energy_Nmm=energy,
+                 contact_energy_Nmm=float(sol.ledger["contact_energy"] + sol.ledger["B0"]),
+                 generated_contact_energy_Nmm=float(sol.ledger["B0"]),
                  stable=stable)
     log.info("relax %s: loop length %.4g mm (input %.4g), wale spacing %.4g mm, course spacing %.4g mm, %d Newton "
              "iterations, %.1f s CPU", cell.name, after["loop_length"], info["loop_length"], after["wale_spacing"],
