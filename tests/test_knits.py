@@ -166,7 +166,7 @@ def test_filaments_beyond_the_failure_stress_are_flagged(wale):
 
 def test_the_jersey_pulled_along_the_courses_carries_no_force_across(jersey):
     """The take-down is let go first: the test starts at zero force and the wales contract."""
-    ds = homtex.tensile(jersey, strain=0.05, direction="course", steps=1)
+    ds = homtex.tensile(jersey, strain=0.02, direction="course", steps=1)
     assert ds.attrs["status"] == "ok" and abs(float(ds.energy_balance[-1])) < 0.01
     assert ds.attrs["take_down_released_Nmm"] > 0
     f = ds.force.values
@@ -175,11 +175,11 @@ def test_the_jersey_pulled_along_the_courses_carries_no_force_across(jersey):
 
 
 def test_with_friction_the_ledger_still_closes_and_the_fabric_is_stiffer(jersey, wale):
-    ds = homtex.tensile(jersey, strain=0.025, direction="wale", steps=1, friction=0.5)
+    ds = homtex.tensile(jersey, strain=0.015, direction="wale", steps=1, friction=0.5)
     assert ds.attrs["status"] == "ok" and ds.attrs["friction"] == 0.5
     W, D = float(ds.external_work[-1]), float(ds.friction_energy[-1])
     assert 0.05 * W < D < W and abs(float(ds.energy_balance[-1])) < 0.01
-    # frictionless, the force at 2.5 % is below the 10 % level of the wale test
+    # frictionless, the force at 10 % is below this one at 1.5 %
     assert float(ds.force[-1]) > float(wale.force[1])
 
 

@@ -134,8 +134,9 @@ def tensile(cell, *, strain, direction: str = "wale", specimen="cell", steps: in
         specimen between grips.
     steps : reported levels (default one per 1 % of strain, at least 10).
     friction : Coulomb coefficient between yarns (default the cell file's).
-    keep_positions : also return node positions ``x`` (strain, node, xyz) and the strain energy of
-        every element ``element_energy`` (strain, element) for pictures and VTK.
+    keep_positions : also return node positions ``x`` (strain, node, xyz), the strain energy of
+        every element ``element_energy`` (strain, element, mechanism) and, for the periodic cell, the
+        lattice vectors ``periods`` (strain, vector, xyz) for pictures and VTK.
     tol : equilibrium tolerance, relative to the forces (Newton).
 
     Returns the Dataset described in the module docstring.
@@ -180,11 +181,12 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
     sol = continue_from(relaxed, info, {0: [0, 1, 2]}, contact, lat, tol, state=state)
     stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam, loads=1.0), max_cuts=10, refine=0.003)
     rec = _Recorder(sol, info, info["yarn_model"].get("failure_stress"))
-    pos, ee = [], []
+    pos, ee, per = [], [], []
     rec.add(0.0, float(sol._react[sol.lat.rows[v], v]), width0, 0.0, width0, 0)
     if keep_positions:
         pos.append(sol.positions.copy())
         ee.append(sol.cor.energy.copy())
+        per.append(sol.lat.periods.copy())
     bar = Progress(steps, "tensile levels", enabled=progress)
     status, detail = Status.OK, ""
     for k in range(1, steps + 1):
@@ -202,6 +204,7 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
         if keep_positions:
             pos.append(sol.positions.copy())
             ee.append(sol.cor.energy.copy())
+            per.append(sol.lat.periods.copy())
         bar.step()
     bar.close()
     attrs = _attrs(relaxed, info, "periodic cell, macro stretch with free lateral contraction", v, mu, L0, width0,
@@ -209,7 +212,7 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
     attrs["take_down_released_Nmm"] = released
     ds = rec.dataset(attrs)
     if keep_positions:
-        _positions(ds, pos, ee)
+        _positions(ds, pos, ee, per)
     return finish(ds, rec, status, detail, sol, info)
 
 
@@ -265,10 +268,13 @@ def _attrs(relaxed, info, what, v, mu, L0, width0, steps, sol, t0) -> dict:
     return a
 
 
-def _positions(ds, pos, ee) -> None:
-    """Node positions (strain, node, xyz) and the energy split of every element (strain, element,
-    mechanism) into ds (in place)."""
+def _positions(ds, pos, ee, periods=None) -> None:
+    """Node positions (strain, node, xyz), the energy split of every element (strain, element,
+    mechanism) and (a periodic cell) the lattice vectors (strain, vector, xyz) into ds (in place)."""
     n = ds.sizes["strain"]
+    if periods:
+        ds["periods"] = (("strain", "vector", "xyz"), np.asarray(periods[:n]),
+                         {"units": "mm", "long_name": "lattice vectors of the cell"})
     ds["x"] = (("strain", "node", "xyz"), np.asarray(pos[:n]), {"units": "mm", "long_name": "node positions"})
     ds["element_energy"] = (("strain", "element", "mechanism"), np.asarray(ee[:n]),
                             {"units": "N mm", "long_name": "strain energy of every element by mechanism"})
