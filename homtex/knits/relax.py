@@ -91,13 +91,12 @@ def loop_measures(frame: Frame, x: np.ndarray, periods: np.ndarray, info: dict) 
     spacing, and the mean loop height and width (y and x extent of each knitted loop's yarn), mm."""
     pat = info["pattern"]
     rep = info["repeat"]
-    ym = info["yarn_model"]
     course = info["course"]
     fil = info["filament"]
     el = frame.elements
     vec = x[el[:, 1]] + frame.images @ periods - x[el[:, 0]]
     L = np.linalg.norm(vec, axis=1)
-    centre = fil == (0 if ym["model"] == "equivalent" else 0)
+    centre = fil == 0                  # the equivalent yarn, or the first (central) filament
     loop = float(L[centre].sum() / info["stitches"])
     beds = 2 if (np.any(pat.bed > 0) and np.any(pat.bed < 0)) else 1
     wales_per_bed = max(1, pat.n_needles * rep[0] // beds)
