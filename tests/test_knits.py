@@ -71,6 +71,18 @@ def test_the_loop_model_is_crane_plain_knit_curve_at_the_loop_length():
     assert xcf(6.0, 1.54) == pytest.approx(6.0 / 1.54 ** 3)
 
 
+def test_a_float_runs_straight_across_the_missed_needle():
+    """Milano's and interlock's misses: the yarn crosses the missed needle moving forward all the
+    way (a float folding back on itself made the interlock's rest frames degenerate)."""
+    pat = parse_notation(["fb", "f-", "-b"])
+    g = knit_geometry(pat, 6.5, core_radius=0.01)
+    cur = course_curve(pat, 1, **{k: g[k] for k in GEO}, samples=64).reshape(2, 64, 3)
+    assert np.all(np.diff(cur[1, :, 0]) > 0)                                 # the float over needle 2
+    assert np.any(np.diff(cur[0, :, 0]) < 0)                                 # a loop turns round
+    cell = homtex.load_cell("cells/milano_eglass.toml").replace(**{"parameters.notation": ["f--b", "-bf-"]})
+    assert cell.info["stitches"] == 4 and cell.info["n_overlaps"] == 0
+
+
 def test_overlaps_at_creation_count_a_course_against_its_own_image():
     """The acrylic jersey (2.66 mm yarn, compressible) overlaps the copy of its one course across
     the wale vector by 2 r - 2 x the loop model's clear radius (half the closest approach of two

@@ -18,8 +18,9 @@ lambda = pitch / (2 pi), a = 3/2 (loop roundness), head at t = 0; in Crane's uni
 h = 4, d = 1, course spacing h + 1/2 and a snug tube radius 4/5 (one loop is then 24.67 long:
 30.8 snug radii). A loop held on its needle for m courses (milano) reaches m - 1 course spacings
 higher: its bottom stays at y_c - h (where it passes through the loop below), its head at
-y_c + h + (m - 1) c. A missed needle carries a float at the sinker level, bulging by d towards its
-bed. sigma is +1 on the front bed (technical face towards +z: legs outside, head and sinkers inside)
+y_c + h + (m - 1) c. A missed needle carries a float at the sinker level, x = x_c + lambda t (it
+runs straight across: the loop's lateral bulge a sin 2t would fold it back on itself), bulging by d
+towards its bed. sigma is +1 on the front bed (technical face towards +z: legs outside, head and sinkers inside)
 and -1 on the back bed (a back loop is the front loop mirrored), blended smoothly to 0 where the
 yarn crosses between the beds; the bed offset Z0 is 0 for one bed and, for two, the one of
 :data:`BEDS` that keeps different courses furthest apart. The curve is analytic per position and
@@ -173,7 +174,7 @@ def course_curve(pat: KnitPattern, j: int, *, pitch: float, c: float, h: float, 
             y = y0 + Hm + Ha * np.cos(t)
             z = s * (Z0 - d * np.cos(2.0 * t))
         else:
-            x = xc + lam * (t + a * np.sin(2.0 * t))
+            x = xc + lam * t                                   # straight across (no loop to turn round)
             y = np.full_like(t, y0 - h)
             z = s * (Z0 - d + d * (1.0 + np.cos(t)) / 2.0)      # bulges by d towards its bed
         out.append(np.column_stack([x, y, z]))
