@@ -9,8 +9,11 @@ on alternate needles, in rib gating). Every course runs in +x (a circular machin
 course closing over the cell's width); the cell repeats the pattern: a1 = (positions x pitch, 0,
 0) along the courses, a2 = (0, courses x course spacing, 0) along the wales.
 
-Loop geometry (stated model): each knitted loop follows the plain-knit curve of K. Crane (2023,
-"A simple parametric model of plain-knit yarns"), per needle position with t in [-pi, pi):
+Loop geometry (stated model): each knitted loop follows the plain-knit curve of K. Crane, "A
+simple parametric model of plain-knit yarns" (https://www.cs.cmu.edu/~kmcrane/Projects/Other/YarnCurve.pdf,
+code at https://github.com/keenancrane/plain-knit-yarn: gamma(t) = (t + a sin 2t, h cos t,
+d cos 2t)), here with z mirrored so that the technical face looks towards +z, per needle position
+with t in [-pi, pi):
 
     x = x_c + lambda (t + a sin 2t),   y = y_c + H_m + H_a cos t,   z = sigma(t) (Z0 - d cos 2t),
 
