@@ -17,7 +17,10 @@ ledger counts it exactly (:class:`~homtex.contact.incremental.NonlinearSettings`
 
 The result is a :class:`RelaxedCell`: the relaxed frame (nodes at their relaxed positions, the
 relaxed lattice, the rest state carried along), and ``attrs`` with the relaxed loop length, wale
-and course spacing, loop height and width against the input, the protocol and the solve's figures.
+and course spacing, loop height and width against the input, the protocol and the solve's figures:
+``released_energy_Nmm`` (what the solver took out) equals the generated state's stored energy
+minus the relaxed one's (``strain_energy_Nmm``, ``contact_energy_Nmm``, the generated contact
+energy ``generated_contact_energy_Nmm``) plus the take-down's work ``take_down_work_Nmm``.
 """
 
 from __future__ import annotations
