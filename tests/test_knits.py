@@ -31,7 +31,7 @@ def test_the_shipped_knit_cells_load_with_the_loop_length_asked_for(name):
     (["fx"], None, "course 1, needle 2: unknown symbol 'x'"),
     (["fb", "--"], None, "course 2 knits no needle"),
     (["fbf"], 2, "course 1, needle 3: stitch outside the bed"),
-    (["ft"], None, "course 1, needle 2: tuck"),
+    (["tt", "ff"], None, "course 1 knits no needle"),
     (["fb", "f"], None, "course 2 has 1 needle positions"),
     (["f-"], None, "needle 2 never knits"),
     (["f", "b"], None, "course 2, needle 1: a needle position knits on both beds"),
@@ -81,6 +81,24 @@ def test_a_float_runs_straight_across_the_missed_needle():
     assert np.any(np.diff(cur[0, :, 0]) < 0)                                 # a loop turns round
     cell = homtex.load_cell("cells/milano_eglass.toml").replace(**{"parameters.notation": ["f--b", "-bf-"]})
     assert cell.info["stitches"] == 4 and cell.info["n_overlaps"] == 0
+
+
+def test_a_tuck_lies_behind_the_held_loop_up_to_its_head():
+    """["ff", "ft"]: needle 2's loop of course 1 is held two courses; course 2's tuck there rises
+    from its sinker level to the held loop's head, behind it (its depth below the knit profile),
+    and the cell builds without overlaps."""
+    pat = parse_notation(["ff", "ft"])
+    assert pat.held()[0, 1] == 2 and pat.held()[0, 0] == 1 and pat.stitches() == 3
+    g = knit_geometry(pat, 6.5, core_radius=0.01)
+    c0 = course_curve(pat, 0, **{k: g[k] for k in GEO}, samples=64).reshape(2, 64, 3)
+    c1 = course_curve(pat, 1, **{k: g[k] for k in GEO}, samples=64).reshape(2, 64, 3)
+    held, tuck = c0[1], c1[1]
+    assert tuck[:, 1].max() == pytest.approx(held[:, 1].max())             # one head height
+    assert tuck[:, 1].min() == pytest.approx(g["c"] - g["h"])              # from course 2's sinker level
+    t = -np.pi + 2 * np.pi * np.arange(64) / 64
+    assert np.all(tuck[:, 2] <= -g["d"] * np.cos(2 * t) + 1e-12)           # behind a knit loop's profile
+    cell = homtex.load_cell("cells/jersey_eglass.toml").replace(**{"parameters.notation": ["ff", "ft"]})
+    assert cell.info["n_overlaps"] == 0 and cell.info["stitches"] == 3
 
 
 def test_overlaps_at_creation_count_a_course_against_its_own_image():
