@@ -491,3 +491,70 @@ def test_a_failed_curve_exits_non_zero_and_keeps_its_files(tmp_path, capsys, mon
         assert err.strip() == f"homtex compress: warning: the result is flagged: {detail}"
     else:
         assert "failed" not in err and "warning" not in err
+
+
+# ------------------------------------------------------------------ homtex tensile (weft knits)
+def _coarse_jersey(tmp_path) -> Path:
+    """The E-glass jersey with 0.65 mm elements (11 per loop), relaxed and pulled frictionless in
+    well under a second; its file says friction 0.3 (the command's --friction 0 must win)."""
+    src = Path(__file__).resolve().parents[1] / "cells" / "jersey_eglass.toml"
+    text = src.read_text()
+    assert "element_length = 0.2" in text and "friction = 0.0" in text
+    p = tmp_path / "jersey_coarse.toml"
+    p.write_text(text.replace("element_length = 0.2", "element_length = 0.65").replace("friction = 0.0",
+                                                                                       "friction = 0.3"))
+    return p
+
+
+def test_tensile_command_gives_the_api_numbers_and_writes_them_with_units(tmp_path, capsys):
+    """``homtex tensile`` relaxes the cell and pulls it through homtex.relax / homtex.tensile: the
+    same numbers as ``homtex.tensile(cell, ...)`` with the same options (--friction over the cell
+    file's), in ``<stem>_tensile_<direction>.nc`` with units, a force-per-width chart and the
+    energy split."""
+    import homtex
+    from homtex.output.charts_data import dataset_kind
+
+    cell = _coarse_jersey(tmp_path)
+    out = tmp_path / "t"
+    assert main(["tensile", str(cell), "--direction", "wale", "--strain", "0.05", "--steps", "1",
+                 "--friction", "0", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "N/mm at 0 / 5 %" in said and "status ok" in said and "relax " in said
+    for name in ("jersey_coarse_tensile_wale.nc", "jersey_coarse_tensile_wale.png",
+                 "jersey_coarse_tensile_wale_energy.png"):
+        assert f"wrote {out / name}" in said and (out / name).stat().st_size > 1000, name
+    api = homtex.tensile(homtex.load_cell(cell), strain=0.05, direction="wale", steps=1, friction=0.0)
+    with xr.open_dataset(out / "jersey_coarse_tensile_wale.nc") as ds:
+        assert dataset_kind(ds) == "knit_tensile" and ds.attrs["direction"] == "wale"
+        assert ds.attrs["friction"] == 0.0 and ds.attrs["steps"] == 1 and ds.attrs["status"] == "ok"
+        assert ds.attrs["relaxed_wale_spacing_mm"] == pytest.approx(ds.attrs["initial_width_mm"])
+        for v in ("force", "force_per_width", "width", "extension", "axial", "torsion", "bending_y", "bending_z",
+                  "shear", "contact_energy", "friction_energy", "external_work", "energy_balance",
+                  "max_filament_stress"):
+            np.testing.assert_allclose(ds[v].values, api[v].values, rtol=1e-10, atol=1e-15, err_msg=v)
+            assert ds[v].attrs["units"] == api[v].attrs["units"], v
+        assert ds.force.attrs["units"] == "N" and ds.force_per_width.attrs["units"] == "N/mm"
+        assert ds.max_filament_stress.attrs["units"] == "MPa" and ds.strain.attrs["units"] == "1"
+        # the physics it claims: the relaxation's take-down (0.06 N per 5 needles, one needle) at the
+        # start, force per width over the relaxed width, lateral contraction, the ledger closed
+        f = ds.force.values
+        assert f[0] == pytest.approx(0.06 / 5) and f[1] > f[0]
+        assert ds.force_per_width.values == pytest.approx(f / ds.attrs["initial_width_mm"])
+        assert float(ds.width[-1]) < float(ds.width[0])
+        assert float(ds.external_work[-1]) > 0 and abs(float(ds.energy_balance[-1])) < 0.01
+
+
+def test_tensile_bad_input_is_one_line_naming_the_culprit(tmp_path, capsys):
+    out = str(tmp_path / "bad")
+    assert main(["tensile", "square", "--direction", "wale", "--strain", "0.1", "--out", out]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("homtex tensile: error: square: not a weft-knit cell")
+    assert "rib_1x1_eglass" in err and "Traceback" not in err
+    assert not list(Path(out).iterdir())                        # nothing written
+    for args, what in ((["--direction", "diagonal", "--strain", "0.1"], "--direction: invalid choice: 'diagonal'"),
+                       (["--direction", "course", "--strain", "0"], "--strain: must be a fraction > 0"),
+                       (["--direction", "course", "--strain", "-0.2"], "--strain: must be a fraction > 0"),
+                       (["--strain", "0.1"], "required: --direction")):
+        assert main(["tensile", "jersey_eglass", *args, "--out", out]) == 2, args
+        err = capsys.readouterr().err
+        assert what in err and "usage: homtex tensile" in err and "Traceback" not in err, (args, err)

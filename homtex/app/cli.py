@@ -6,6 +6,7 @@
     homtex compress CELL [--strain 0.3] [--steps 20] [--geometry nonlinear|linear] [--friction MU] [--out DIR]
     homtex seam     CELL --distance D [--prestrain EPS] [--method yarn|foundation] [--out DIR]
     homtex macro    CELL [--distance D] [--steps 35 | --curve FILE.nc] [--strain 0.5] [--scatter S] ...
+    homtex tensile  CELL --direction wale|course --strain S [--steps N] [--friction MU] [--out DIR]
     homtex study    STUDY.toml --out DIR [--scheduler ADDRESS] [--workers N] [--keep-failed] [--connect-timeout S]
     homtex plot     FILE.nc [--out IMAGE] [--var NAME] [--sel DIM=VALUE]
     homtex cache    [--clear]                   what the result cache holds (sewn seams, laws), or empty it
@@ -135,6 +136,16 @@ def cmd_macro(args) -> None:
     _check_status(args, ds)
 
 
+def cmd_tensile(args) -> None:
+    from .commands import tensile_cell
+
+    ds, paths, _ = tensile_cell(args.cell, _out(args, "results/tensile"), strain=args.strain,
+                                direction=args.direction, steps=args.steps, friction=args.friction)
+    for p in paths:
+        _say(f"  wrote {p}")
+    _check_status(args, ds)
+
+
 def cmd_study(args) -> None:
     """Run or resume a study. Exit status: 0 all points ok; 1 some points failed (result.nc is
     still written, with ``status``/``error`` per point; a rerun retries them unless
@@ -225,6 +236,14 @@ def prestrain(text):
     v = _number(text)
     if not 0 <= v < 1:
         raise argparse.ArgumentTypeError(f"must lie in [0, 1) (0.3 = 30 %), got {text!r}")
+    return v
+
+
+def tensile_strain(text):
+    """a number in (0, 2]"""
+    v = _number(text)
+    if not (math.isfinite(v) and 0 < v <= 2):
+        raise argparse.ArgumentTypeError(f"must be a fraction > 0 and at most 2 (0.3 = 30 %), got {text!r}")
     return v
 
 
@@ -389,6 +408,29 @@ def build_parser() -> Parser:
                         "foundation model (default: %(default)s)")
     _add_out(s, "results/macro")
     s.set_defaults(func=cmd_macro)
+
+    s = sub.add_parser("tensile", help="tensile test of a weft-knit cell along the wales or the courses",
+                       description="A weft-knit cell relaxed (homtex.relax: take-down 0.06 N per 5 needles, lattice "
+                       "free in the fabric plane) and its periodic cell pulled along the wales or the courses with "
+                       "free lateral contraction (homtex.tensile), as the API computes them: "
+                       "<cell file stem>_tensile_<direction>.nc/.png (force per width, N/mm) and "
+                       "<cell file stem>_tensile_<direction>_energy.png (energy split).")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP + "; a weft-knit cell (jersey_eglass, rib_1x1_eglass, "
+                   "milano_eglass, jersey_acrylic, rib_1x1_acrylic)")
+    s.add_argument("--direction", choices=("wale", "course"), required=True,
+                   help="test direction: wale (along the wales, the lattice vector a2) or course (along the "
+                        "courses, a1) (required)")
+    s.add_argument("--strain", type=tensile_strain, required=True, metavar="S",
+                   help="final extension over the gauge length, a fraction > 0 and at most 2 (0.3 = 30 %%) "
+                        "(required)")
+    s.add_argument("--steps", type=count, default=None, metavar="N",
+                   help="reported levels, integer >= 1; the engine halves a step that fails (default: one per "
+                        "1 %% of strain, at least 10)")
+    s.add_argument("--friction", type=non_negative, default=None, metavar="MU",
+                   help="Coulomb coefficient (dimensionless) between the yarns, >= 0, in the relaxation and the "
+                        "test (default: the cell file's [contact] friction, else 0)")
+    _add_out(s, "results/tensile")
+    s.set_defaults(func=cmd_tensile)
 
     s = sub.add_parser("study", help="run a parameter study (resumable)",
                        description="Run or resume a parameter study. Exit status 0: all points ok; 1: points "

@@ -131,6 +131,81 @@ def seam_cell(path, out: Path, *, seam_distance, prestrain=None, method="yarn"):
     return prof, [nc, png]
 
 
+# ----------------------------------------------------------------------------- knits
+def knit_cells() -> list:
+    """Names of the shipped weft-knit cells (their file's [cell] generator is "weft_knit")."""
+    from ..cells import tomllib
+
+    names = []
+    for name in shipped_cells():
+        try:
+            with open(find_cell(name), "rb") as fh:
+                if tomllib.load(fh).get("cell", {}).get("generator") == "weft_knit":
+                    names.append(name)
+        except (OSError, ValueError):
+            continue
+    return names
+
+
+def tensile_summary(ds) -> str:
+    """One line: force per width at up to five levels, the width, the peak filament stress, the
+    first level beyond the failure stress, the worst energy balance, the status."""
+    s, f = ds.strain.values, ds.force_per_width.values
+    pick = sorted({int(round(i)) for i in np.linspace(0, len(s) - 1, min(len(s), 5))})
+    fs = ds.attrs.get("failure_stress_MPa")
+    first = float(ds.attrs.get("first_failure_strain", math.nan))
+    if fs is None:
+        fail = ""
+    elif math.isfinite(first):
+        fail = f"; first filament beyond {fs:g} MPa at {100 * first:.3g} %"
+    else:
+        fail = f"; no filament beyond {fs:g} MPa"
+    bal = np.abs(ds.energy_balance.values)
+    return (f"{ds.attrs['direction']} direction, friction {ds.attrs['friction']:g}: force per width "
+            + " / ".join(f"{f[i]:.4g}" for i in pick) + " N/mm at " + " / ".join(f"{100 * s[i]:.3g}" for i in pick)
+            + f" %; width {float(ds.width[0]):.4g} -> {float(ds.width[-1]):.4g} mm; peak filament stress "
+            f"{ds.attrs['peak_filament_stress_MPa']:.4g} MPa at {100 * ds.attrs['peak_strain']:.3g} %{fail}; "
+            f"energy balance within {100 * float(np.nanmax(bal)) if bal.size else math.nan:.2g} %; "
+            f"status {ds.attrs.get('status', 'ok')}")
+
+
+def tensile_cell(path, out: Path, *, strain, direction="wale", steps=None, friction=None):
+    """A weft-knit cell relaxed (``homtex.relax(cell, friction=friction)``) and its periodic cell
+    pulled (``homtex.tensile(relaxed, strain=..., direction=..., steps=..., friction=...)``), as
+    ``homtex.tensile(cell, ...)`` computes it: ``<stem>_tensile_<direction>.nc``, the force per
+    width chart ``.png`` and the energy split ``<stem>_tensile_<direction>_energy.png``. The
+    relaxation is computed each time (the result cache keeps Datasets, not relaxed cells).
+    Returns (Dataset, [paths], summary line)."""
+    from ..knits import relax, tensile
+    from ..knits.charts import energy_split_chart
+    from ..output.charts_data import knit_tensile_chart
+
+    cell = load(path)
+    if getattr(cell, "generator", None) != "weft_knit":
+        raise InputError(f"{path}: not a weft-knit cell (its generator is {getattr(cell, 'generator', None)!r}, "
+                         f"not 'weft_knit'); homtex tensile takes a weft-knit cell: {', '.join(knit_cells())}")
+    with heartbeat(f"relaxation of {cell.name}"):
+        relaxed = relax(cell, friction=friction)
+    with heartbeat(f"tensile test of {cell.name} along the {direction}s to {100 * float(strain):g} %"):
+        ds = tensile(relaxed, strain=strain, direction=direction, steps=steps, friction=friction, progress=True)
+    ra = relaxed.attrs
+    ds.attrs.update({k: v for k, v in ra.items() if k.startswith(("relaxed_", "generated_"))})
+    ds.attrs.update(relax_newton_iterations=ra["newton_iterations"], relax_cpu_seconds=ra["cpu_seconds"],
+                    relax_energy_balance=ra["energy_balance"], take_down_N=ra["take_down_N"])
+    ds.attrs.update({f"cell_{k}": v for k, v in cell.attrs().items()})
+    describe(ds, "knit_tensile", cell)
+    out = Path(out)
+    stem = f"{stem_of(cell)}_tensile_{direction}"
+    title = f"{cell.name}: periodic cell pulled along the {direction}s"
+    nc = _save(_attrs(ds, title=title), out / f"{stem}.nc")
+    png = save(knit_tensile_chart(ds), out / f"{stem}.png")
+    energy = save(energy_split_chart(ds, title=f"{cell.name}: energy split over the extension ({direction}s, "
+                                                f"friction {ds.attrs['friction']:g})"), out / f"{stem}_energy.png")
+    line = tensile_summary(ds)
+    log.info(line)
+    return ds, [nc, png, energy], line
+
+
 # ----------------------------------------------------------------------------- macro layer
 def read_dataset(path, what="netCDF file") -> xr.Dataset:
     """A netCDF file loaded into memory; InputError naming the file when it is missing, a folder
@@ -240,5 +315,5 @@ def plot_file(path, out=None, *, var=None, sel=None) -> Path:
     return save(fig, png)
 
 
-__all__ = ["cell_summary", "compress_cell", "homogenize_cell", "load", "macro_cell",
-           "macro_summary", "plot_file", "read_dataset", "seam_cell"]
+__all__ = ["cell_summary", "compress_cell", "homogenize_cell", "knit_cells", "load", "macro_cell",
+           "macro_summary", "plot_file", "read_dataset", "seam_cell", "tensile_cell", "tensile_summary"]

@@ -22,7 +22,8 @@ from .charts import (
     speed_accuracy_chart,
 )
 
-__all__ = ["KINDS", "chart", "dataset_kind", "generic_chart", "homogenization_chart", "study_chart"]
+__all__ = ["KINDS", "chart", "dataset_kind", "generic_chart", "homogenization_chart", "knit_tensile_chart",
+           "study_chart"]
 
 
 def _label(da, name=None) -> str:
@@ -252,9 +253,24 @@ def generic_chart(ds, *, var: str | None = None, max_panels: int = 6):
     return fig
 
 
+def knit_tensile_chart(ds):
+    """Force per width over the strain of a knit tensile test (``homtex tensile``,
+    ``homtex.tensile``); one curve per friction coefficient where ``friction`` is a dimension."""
+    from ..knits.charts import tensile_chart
+
+    if "friction" in ds.dims:
+        curves = {f"friction {float(mu):g}": ds.sel(friction=mu) for mu in ds.friction.values}
+    else:
+        curves = {f"friction {float(ds.attrs.get('friction', 0.0)):g}": ds}
+    where = str(ds.attrs.get("direction", "?"))
+    name = cell_label(ds) if "cell_name" in ds.attrs or "cell" not in ds.attrs else str(ds.attrs["cell"])
+    return tensile_chart(curves, title=f"{name}\n{ds.attrs.get('specimen', 'tensile test')}, along the {where}s")
+
+
 KINDS = {"compression": compression_chart, "seam_profile": seam_profile_chart, "macro_curve": macro_chart,
          "macro_curves": macro_chart, "cushions": cushions_chart, "seamed_vs_macro": seamed_chart,
-         "speed_accuracy": speed_accuracy_chart, "homogenization": homogenization_chart, "study": study_chart}
+         "speed_accuracy": speed_accuracy_chart, "homogenization": homogenization_chart, "study": study_chart,
+         "knit_tensile": knit_tensile_chart}
 
 
 def dataset_kind(ds) -> str:
@@ -280,6 +296,8 @@ def dataset_kind(ds) -> str:
         return "macro_curves"
     if "force" in v and "plate_displacement" in dims and "column_height" in v:
         return "macro_curve"
+    if "force_per_width" in v and "strain" in dims:
+        return "knit_tensile"
     if "stress" in v and "strain" in dims:
         return "compression"
     return "generic"
