@@ -16,8 +16,9 @@ torsion factor, so that GJ / EI stays) and the loop length change, the yarn's ra
 stiffness and contact law stay: the law holds while bending dominates and fails where yarns
 straighten and press on each other. Measured on the E-glass jersey pulled along the wales (loop
 length x 1.54, bending rigidity x 6, take-down x a / b^2; 8 levels to 40 %): the force ratio at the
-same strain, a / b^2 = 2.53 where the law holds, stays within 2.38-2.66 up to 25 % and falls to
-1.99 at 30 % and 1.78-1.80 at 35-40 %, where the loops straighten.
+same strain, a / b^2 = 2.53 where the law holds, stays within 2.38-2.66 up to 20 %, is 2.32 at
+25 % and falls to 1.99 at 30 % and 1.78-1.80 at 35-40 %, where the loops straighten
+(docs/knits.md).
 """
 
 from __future__ import annotations
