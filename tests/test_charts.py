@@ -148,9 +148,22 @@ def seamed_ds():
     return _meta(ds)
 
 
+def knit_tensile_ds():
+    """Like the knit rib study's file (homtex.tensile over strain, friction as a dimension)."""
+    e = np.linspace(0, 0.45, 10)
+    f = np.outer([1.0, 1.6], 0.023 + 0.2 * e + 40 * np.maximum(e - 0.35, 0) ** 2)
+    ds = xr.Dataset({"force_per_width": (("friction", "strain"), f, {"units": "N/mm", "long_name": "force per width"}),
+                     "force": (("friction", "strain"), 1.046 * f, {"units": "N", "long_name": "force"}),
+                     "width": (("friction", "strain"), np.tile(1.046 - e, (2, 1)), {"units": "mm", "long_name": "w"})},
+                    coords={"strain": ("strain", e, {"units": "1", "long_name": "strain"}),
+                            "friction": ("friction", [0.0, 0.5], {"units": "1", "long_name": "friction"})},
+                    attrs={"direction": "wale", "specimen": "periodic cell"})
+    return _meta(ds)
+
+
 ALL = {"compression": compression_ds, "seam_profile": yarn_profile_ds, "macro_curves": macro_ds,
        "macro_curve": lambda: macro_ds(False), "study": lambda: study_ds("samples"), "cushions": cushions_ds,
-       "seamed_vs_macro": seamed_ds, "speed_accuracy": speed_ds}
+       "seamed_vs_macro": seamed_ds, "speed_accuracy": speed_ds, "knit_tensile": knit_tensile_ds}
 
 
 def _texts(fig):

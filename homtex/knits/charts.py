@@ -10,7 +10,7 @@ import numpy as np
 
 from ..model.frame import Frame
 from ..model.results import ENERGY_KEYS
-from ..output.charts import pyplot, save
+from ..output.charts import _tag, pyplot, save
 
 __all__ = ["energy_split_chart", "knit_picture", "state_frame", "tensile_chart", "write_state_vtk"]
 
@@ -73,7 +73,7 @@ def tensile_chart(curves: dict, *, title: str = "", per_width: bool = True, mark
         ax.annotate(text, (100 * x, y), textcoords="offset points", xytext=(-60, 15), fontsize=8,
                     arrowprops={"arrowstyle": "->", "lw": 0.6})
     ax.set_xlabel("strain (extension / gauge length), %")
-    ax.set_ylabel("force per width, N/mm" if per_width else "force, N")
+    _tag(ax, "N/mm" if per_width else "N", "force per width" if per_width else "force", *ax.lines)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(title, fontsize=10)
