@@ -223,6 +223,32 @@ def _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options, 
     return curve, profile, t_sub
 
 
+
+def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0, cushion, height_scatter, seed, a):
+    """(force (steps,) N, failure detail or '', seconds spent on the curve): the "cushion" law of
+    :func:`macro_curve`, every column on the cushion's own curve shifted by its cushion's height
+    difference (NaN past the curve's end)."""
+    t0 = time.perf_counter()
+    if cushion_curve is None:
+        if cell is None:
+            raise InputError("macro_curve(law='cushion'): give a cell or a cushion_curve")
+        # pressed as far as asked, in the default law's 2 % plate steps (the sewn d = 24 mm cell is
+        # followed to 64 %, docs/seams.md; a press that fails is not kept on disk)
+        n = max(1, int(round(float(strain) * LAW_STEPS / LAW_STRAIN)))
+        cushion_curve = cushion_law(cell, seam_distance=float(seam_distance), strain=float(strain), steps=n)
+    t_curve = time.perf_counter() - t0
+    claw, c_max = unseamed_law(cushion_curve)
+    shift = cushion_shifts(cushion, height_scatter, seed) / H0      # (n_columns,) strain
+    need = eps_end + max(float(shift.max(initial=0.0)), 0.0)     # the tallest cushion is the furthest in
+    fail = ""
+    if c_max < need - 1e-12:
+        attrs = getattr(cushion_curve, "attrs", {})
+        why = attrs.get("status_detail", attrs.get("status", "unknown"))
+        fail = f"the cushion's curve ends at strain {c_max:.4g} < {need:.4g} (its status: {why}); curve truncated"
+    e_col = np.clip(eps[:, None] + shift[None, :], 0.0, None)
+    sig = np.where(e_col <= c_max + 1e-12, claw(np.minimum(e_col, c_max)), np.nan)
+    return sig.sum(axis=1) * a * 1e-3, fail, t_curve
+
 def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, plate_area: float = 12100.0,
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
                 steps: int = 201, thickness: float | None = None, pre_stress: str = "thread",
@@ -254,14 +280,9 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     seam_offset : position of a seam line from the plate edge, mm (profile x = 0 is a seam line).
     compress_options, profile_options : keyword arguments for ``homtex.compress`` and
         ``homtex.seam_profile`` (e.g. ``{"method": "foundation"}``) where they are called.
-    law : "columns" (default: every column follows the unseamed law from its cushion height, see
-        the module docstring) or "cushion" (every cushion follows the seamed cushion's own curve,
-        ``cushion_curve`` or :func:`cushion_law`: the sewn seam cell pressed at yarn level, so the
-        seam line, the bent layers and the slackening thread are in it; a cushion delta_k higher
-        than the nominal one meets the punch delta_k earlier: its curve shifted by delta_k in plate
-        travel. Needs ``seam_distance``; the columns still give the engaged fraction.)
-    cushion_curve : the "cushion" law's curve: Dataset with ``stress`` (kPa) over ``strain``
-        (plate travel / H0, from the unseamed thickness), e.g. ``seam_compression`` of the cell.
+    law : "columns" (default; module docstring) or "cushion": every cushion on the sewn cell's own
+        yarn-level curve (``cushion_curve``, a Dataset with ``stress`` kPa over ``strain`` from H0, or
+        :func:`cushion_law`), shifted by its height difference delta_k in plate travel.
 
     Returns
     -------
@@ -273,8 +294,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     check_choice(pre_stress, "pre_stress", PRE_STRESS)
     mode = check_choice(law, "law", LAWS)       # (below, ``law`` is the unseamed law's function)
     if mode == "cushion" and seam_distance is None:
-        raise InputError("macro_curve(law='cushion') needs seam_distance (mm): without seams every column is the "
-                         "unseamed fabric (law='columns')")
+        raise InputError("macro_curve(law='cushion') needs seam_distance (mm); no seams: law='columns'")
     if slack_travel is not None:   # inf allowed: the "held" limit
         slack_travel = check_number(slack_travel, "slack_travel", ge=0.0, finite=False)
     strain = check_number(strain, "strain", gt=0.0, lt=1.0)
@@ -346,26 +366,10 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         total = total - held
     force = total * a * 1e-3  # kPa mm^2 -> N
     if mode == "cushion":
-        t_c = time.perf_counter()
-        if cushion_curve is None:
-            if cell is None:
-                raise InputError("macro_curve(law='cushion'): give a cell or a cushion_curve")
-            # pressed as far as asked, in the default law's 2 % plate steps (the sewn d = 24 mm cell is
-            # followed to 64 %, docs/seams.md; a press that fails is not kept on disk)
-            n = max(1, int(round(float(strain) * LAW_STEPS / LAW_STRAIN)))
-            cushion_curve = cushion_law(cell, seam_distance=float(seam_distance), strain=float(strain), steps=n)
-        t_sub += time.perf_counter() - t_c
-        claw, c_max = unseamed_law(cushion_curve)
-        shift = cushion_shifts(cushion, height_scatter, seed) / H0      # (n_columns,) strain
-        need = eps_end + max(float(shift.max(initial=0.0)), 0.0)     # the tallest cushion is the furthest in
-        if c_max < need - 1e-12:
-            attrs = getattr(cushion_curve, "attrs", {})
-            why = attrs.get("status_detail", attrs.get("status", "unknown"))
-            status, detail = Status.FAILED, (f"the cushion's curve ends at strain {c_max:.4g} < {need:.4g} "
-                                             f"(its status: {why}); curve truncated")
-        e_col = np.clip(eps[:, None] + shift[None, :], 0.0, None)
-        sig = np.where(e_col <= c_max + 1e-12, claw(np.minimum(e_col, c_max)), np.nan)
-        force = sig.sum(axis=1) * a * 1e-3
+        force, fail, t_c = _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0, cushion,
+                                          height_scatter, seed, a)
+        t_sub += t_c
+        status, detail = (Status.FAILED, fail) if fail else (status, detail)
     frac = k / n_columns
     seconds = time.perf_counter() - t0 - t_sub
     per = {k: float(h[cushion == k].max()) for k in np.unique(cushion)}

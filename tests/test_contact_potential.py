@@ -14,10 +14,10 @@ from homtex.contact.distance import (
     segment_distance,
     sin2_angle,
 )
-from homtex.contact.exclusions import arc_exclusions
 from homtex.contact.plates import plate_potential
 from homtex.contact.potential import Enforcement, assemble_blocks, frame_stencil, pair_potential, pair_stencil
 from homtex.errors import InputError
+from homtex.model.exclusions import arc_exclusions
 
 ipctk = pytest.importorskip("ipctk")
 

@@ -303,6 +303,32 @@ def _add_out(s, default: str) -> None:
                         f"(default: {default})")
 
 
+
+def _add_tensile(sub) -> None:
+    """The ``tensile`` subcommand (its own function: build_parser stays readable)."""
+    s = sub.add_parser("tensile", help="tensile test of a weft-knit cell along the wales or the courses",
+                       description="A weft-knit cell relaxed (homtex.relax: take-down 0.06 N per 5 needles, lattice "
+                       "free in the fabric plane) and its periodic cell pulled along the wales or the courses with "
+                       "free lateral contraction (homtex.tensile), as the API computes them: "
+                       "<cell file stem>_tensile_<direction>.nc/.png (force per width, N/mm) and "
+                       "<cell file stem>_tensile_<direction>_energy.png (energy split).")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP + "; a weft-knit cell (jersey_eglass, rib_1x1_eglass, "
+                   "milano_eglass, jersey_acrylic, rib_1x1_acrylic)")
+    s.add_argument("--direction", choices=("wale", "course"), required=True,
+                   help="test direction: wale (along the wales, the lattice vector a2) or course (along the "
+                        "courses, a1) (required)")
+    s.add_argument("--strain", type=tensile_strain, required=True, metavar="S",
+                   help="final extension over the gauge length, a fraction > 0 and at most 2 (0.3 = 30 %%) "
+                        "(required)")
+    s.add_argument("--steps", type=count, default=None, metavar="N",
+                   help="reported levels, integer >= 1; the engine halves a step that fails (default: one per "
+                        "1 %% of strain, at least 10)")
+    s.add_argument("--friction", type=non_negative, default=None, metavar="MU",
+                   help="Coulomb coefficient (dimensionless) between the yarns, >= 0, in the relaxation and the "
+                        "test (default: the cell file's [contact] friction, else 0)")
+    _add_out(s, "results/tensile")
+    s.set_defaults(func=cmd_tensile)
+
 def build_parser() -> Parser:
     p = Parser(prog="homtex", description="homtex: yarn-level mechanics of technical textiles, one command per "
                "pipeline stage, each writing netCDF + PNG.",
@@ -409,28 +435,7 @@ def build_parser() -> Parser:
     _add_out(s, "results/macro")
     s.set_defaults(func=cmd_macro)
 
-    s = sub.add_parser("tensile", help="tensile test of a weft-knit cell along the wales or the courses",
-                       description="A weft-knit cell relaxed (homtex.relax: take-down 0.06 N per 5 needles, lattice "
-                       "free in the fabric plane) and its periodic cell pulled along the wales or the courses with "
-                       "free lateral contraction (homtex.tensile), as the API computes them: "
-                       "<cell file stem>_tensile_<direction>.nc/.png (force per width, N/mm) and "
-                       "<cell file stem>_tensile_<direction>_energy.png (energy split).")
-    s.add_argument("cell", metavar="CELL", help=CELL_HELP + "; a weft-knit cell (jersey_eglass, rib_1x1_eglass, "
-                   "milano_eglass, jersey_acrylic, rib_1x1_acrylic)")
-    s.add_argument("--direction", choices=("wale", "course"), required=True,
-                   help="test direction: wale (along the wales, the lattice vector a2) or course (along the "
-                        "courses, a1) (required)")
-    s.add_argument("--strain", type=tensile_strain, required=True, metavar="S",
-                   help="final extension over the gauge length, a fraction > 0 and at most 2 (0.3 = 30 %%) "
-                        "(required)")
-    s.add_argument("--steps", type=count, default=None, metavar="N",
-                   help="reported levels, integer >= 1; the engine halves a step that fails (default: one per "
-                        "1 %% of strain, at least 10)")
-    s.add_argument("--friction", type=non_negative, default=None, metavar="MU",
-                   help="Coulomb coefficient (dimensionless) between the yarns, >= 0, in the relaxation and the "
-                        "test (default: the cell file's [contact] friction, else 0)")
-    _add_out(s, "results/tensile")
-    s.set_defaults(func=cmd_tensile)
+    _add_tensile(sub)
 
     s = sub.add_parser("study", help="run a parameter study (resumable)",
                        description="Run or resume a parameter study. Exit status 0: all points ok; 1: points "

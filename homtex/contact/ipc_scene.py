@@ -10,7 +10,7 @@ Rigid plates are planes normal to z; plate p is an extra node n + p whose uz is 
 
 Candidates come from the uniform-grid broad phase (:class:`~homtex.contact.broad.BroadPhase`,
 periodic images included) with the same-yarn filter by arc length
-(:func:`~homtex.contact.exclusions.arc_exclusions`), searched with a margin; the scene tracks how
+(:func:`~homtex.model.exclusions.arc_exclusions`), searched with a margin; the scene tracks how
 far nodes moved since the search, and the engine searches again before a step could reach a
 pair outside the list.
 
@@ -31,9 +31,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError
+from ..model.exclusions import arc_exclusions
 from .broad import BroadPhase
 from .constraints import pair_keys
-from .exclusions import arc_exclusions
 from .friction import FrictionLag, pair_friction_lag, plate_friction_lag
 from .options import Contact
 from .potential import Enforcement, frame_stencil, pair_potential

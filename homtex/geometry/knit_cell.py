@@ -35,12 +35,12 @@ import logging
 
 import numpy as np
 
-from ..contact.exclusions import arc_exclusions
 from ..errors import CellError
 from ..model.compression import YarnCompression
+from ..model.exclusions import arc_exclusions
 from ..model.frame import Frame
 from ..model.rest import node_frames, straight_rest
-from ..validate import check_keys, get_int, get_list, get_number, get_str, get_table
+from ..validate import check_keys, check_size, get_int, get_list, get_number, get_str, get_table
 from .curves import segment_distances
 from .weft_knit import course_curve, hex_offsets, knit_geometry, parse_notation, resample
 
@@ -155,18 +155,24 @@ def build_cell(parameters: dict, yarns: dict, resolution: dict) -> tuple:
     yarn = yarns[name]
     ym = _yarn_model(get_table(parameters, "yarn_model", t, required=False), yarn)
     comp = _compression(get_table(parameters, "compression", t, required=False))
-    loop = get_number(parameters, "loop_length", t, gt=0)
+    # bounds keep a mistyped number from asking for an unbounded number of elements
+    loop = get_number(parameters, "loop_length", t, gt=0, le=1e3)
     rep = get_list(parameters, "repeat", t, shape=(2,), integer=True, default=[1, 1], gt=0)
+    if rep.max() > 100:
+        raise CellError(f"repeat {rep.tolist()}: at most 100 cells each way", table=t, key="repeat")
     rep = (int(rep[0]), int(rep[1]))
     core = ym["bundle_radius"] - (comp.shell if comp is not None else 0.0)
     if comp is not None and ym["model"] == "equivalent":
         comp.check_radius(ym["bundle_radius"])
     geo = knit_geometry(pat, loop, core_radius=core, wale_spacing=get_number(parameters, "wale_spacing", t, gt=0,
-                                                                             required=False),
-                        course_spacing=get_number(parameters, "course_spacing", t, gt=0, required=False))
+                                                                             le=1e3, required=False),
+                        course_spacing=get_number(parameters, "course_spacing", t, gt=0, le=1e3, required=False))
     r = resolution or {}
     check_keys(r, ("element_length",), "resolution")
-    h = get_number(r, "element_length", "resolution", gt=0, default=loop / 10.0)
+    h = get_number(r, "element_length", "resolution", gt=loop * 1e-4, le=loop, default=loop / 10.0)
+    fil = ym["filaments"] if ym["model"] == "filaments" else 1
+    check_size(int(pat.n_courses * pat.n_needles * rep[0] * rep[1] * fil * (loop / h + 8)),
+               f"the weft-knit cell (element_length {h:g} mm, repeat {list(rep)})")
     frame, course, fil = knit_frame(pat, geo, yarn, ym, h, rep)
     # the polyline's chords are shorter than the curve: scale the geometry once so that the
     # discretised yarn has the stitch length asked for
@@ -204,7 +210,7 @@ def creation_overlaps(frame: Frame, *, core=None, tol: float = 1e-9) -> dict:
 
     A course meets copies of itself across the wale lattice vector (a jersey cell has one yarn
     that interlocks with its own image), so same-yarn pairs are told apart by image: a pair is
-    left out only where the engine leaves it out (:func:`~homtex.contact.exclusions.arc_exclusions`:
+    left out only where the engine leaves it out (:func:`~homtex.model.exclusions.arc_exclusions`:
     elements sharing a node, or of one yarn closer than 3 r along it, at that image).
 
     Parameters

@@ -292,6 +292,9 @@ def knit_geometry(pat: KnitPattern, loop_length: float, *, core_radius: float, w
             lo, hi = (mid, hi) if length(mid) < loop_length else (lo, mid)
         geo.update(d=0.5 * (lo + hi), Z0=beds * 0.5 * (lo + hi))
     snug, (jt, it) = clear_radius(pat, where=True, **{k: geo[k] for k in ("pitch", "c", "h", "d", "Z0")})
+    if core_radius > snug * (1.0 + 1e-9) and snug <= 0.0:
+        raise CellError(f"course {jt + 1}, needle {it + 1}: a loop too short to close: loop length {loop_length:g} mm "
+                        "gives loops that clear no yarn at all", table=table, key="loop_length")
     if core_radius > snug * (1.0 + 1e-9):
         raise CellError(f"course {jt + 1}, needle {it + 1}: a loop too short to close: loop length {loop_length:g} mm "
                         "gives loops that clear "

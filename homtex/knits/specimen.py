@@ -34,7 +34,7 @@ from ..model.frame import Frame
 from ..model.rest import RestState, start_rest
 from ..model.results import Status
 from ..output.progress import Progress
-from .tensile import _attrs, _positions, _Recorder, finish, settings
+from .record import _attrs, _positions, _Recorder, finish, settings
 
 log = logging.getLogger(__name__)
 
