@@ -11,8 +11,10 @@ import numpy as np
 
 from ..analysis.energy import ledger_check
 from ..contact.incremental import NonlinearSettings
+from ..errors import SolverError
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
 from ..output.datasets import curve_dataset
+from ..output.progress import Progress
 
 __all__ = ["META", "filament_stresses", "finish", "settings"]
 
@@ -142,3 +144,22 @@ def finish(ds, rec, status, detail, sol, info):
                     peak_course=int(info["course"][e]), peak_filament=int(info["filament"][e]),
                     peak_axial_strain=float(s / float(sol.frame.E[e])))
     return ds
+
+
+def march(stepper, steps: int, strain: float, on_level, *, what: str, progress: bool) -> tuple:
+    """Advance ``stepper`` through ``steps`` equal levels to ``strain``, calling
+    ``on_level(strain_k, newton_iterations)`` after each; (Status, detail): FAILED with the level
+    where a step failed at every size (the levels before it are recorded)."""
+    bar = Progress(steps, f"{what} levels", enabled=progress)
+    status, detail = Status.OK, ""
+    for k in range(1, steps + 1):
+        try:
+            stepper.advance(k / steps)
+        except SolverError as err:
+            status, detail = Status.FAILED, f"failed at strain {strain * k / steps:.4g} (step {k} of {steps}): {err}"
+            log.warning("%s: %s", what, detail)
+            break
+        on_level(strain * k / steps, stepper.take_totals()["iterations"])
+        bar.step()
+    bar.close()
+    return status, detail

@@ -32,9 +32,7 @@ from ..contact.options import Contact
 from ..errors import InputError, SolverError
 from ..model.frame import Frame
 from ..model.rest import RestState, start_rest
-from ..model.results import Status
-from ..output.progress import Progress
-from .record import _attrs, _positions, _Recorder, finish, settings
+from .record import _attrs, _positions, _Recorder, finish, march, settings
 
 log = logging.getLogger(__name__)
 
@@ -162,21 +160,14 @@ def specimen_test(relaxed, info, wales, courses, strain, v, steps, mu, progress,
                 np.mean(spec.nodes[top, 1])), width0, it)
 
     add(0.0, 0)
-    bar = Progress(steps, "specimen levels", enabled=progress)
-    status, detail = Status.OK, ""
-    for k in range(1, steps + 1):
-        try:
-            stepper.advance(k / steps)
-        except SolverError as err:
-            status, detail = Status.FAILED, f"failed at strain {strain * k / steps:.4g} (step {k} of {steps}): {err}"
-            log.warning("tensile specimen: %s", detail)
-            break
-        add(strain * k / steps, stepper.take_totals()["iterations"])
+
+    def level(s, iters):
+        add(s, iters)
         if keep_positions:
             pos.append(sol.positions.copy())
             ee.append(sol.cor.energy.copy())
-        bar.step()
-    bar.close()
+
+    status, detail = march(stepper, steps, strain, level, what="tensile specimen", progress=progress)
     attrs = _attrs(relaxed, info, f"finite specimen, {wales} needles x {courses} courses between grips", v, mu, L0,
                    width0, steps, sol, t0)
     attrs["released_at_cut_Nmm"] = float(rel.ledger["stabilization"])

@@ -38,10 +38,8 @@ from ..contact.ipc_system import serial_numba
 from ..contact.lattice import Lattice
 from ..contact.options import Contact
 from ..errors import InputError, SolverError
-from ..model.results import Status
-from ..output.progress import Progress
 from ..validate import check_choice, check_int, check_number
-from .record import _attrs, _positions, _Recorder, finish, settings
+from .record import _attrs, _positions, _Recorder, finish, march, settings
 from .relax import RelaxedCell, cell_friction, knit_info, relax
 
 log = logging.getLogger(__name__)
@@ -118,26 +116,16 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
         pos.append(sol.positions.copy())
         ee.append(sol.cor.energy.copy())
         per.append(sol.lat.periods.copy())
-    bar = Progress(steps, "tensile levels", enabled=progress)
-    status, detail = Status.OK, ""
-    for k in range(1, steps + 1):
-        try:
-            stepper.advance(k / steps)
-        except SolverError as err:
-            status, detail = Status.FAILED, f"failed at strain {strain * k / steps:.4g} (step {k} of {steps}): {err}"
-            log.warning("tensile: %s", detail)
-            break
-        tot = stepper.take_totals()
-        react = sol._react
+    def level(s, iters):
         P = sol.lat.periods
-        rec.add(strain * k / steps, float(react[sol.lat.rows[v], v]), float(np.linalg.norm(P[w])),
-                float(P[v, v] - L0), width0, tot["iterations"])
+        rec.add(s, float(sol._react[sol.lat.rows[v], v]), float(np.linalg.norm(P[w])), float(P[v, v] - L0), width0,
+                iters)
         if keep_positions:
             pos.append(sol.positions.copy())
             ee.append(sol.cor.energy.copy())
             per.append(sol.lat.periods.copy())
-        bar.step()
-    bar.close()
+
+    status, detail = march(stepper, steps, strain, level, what="tensile", progress=progress)
     attrs = _attrs(relaxed, info, "periodic cell, macro stretch with free lateral contraction", v, mu, L0, width0,
                    steps, sol, t0)
     attrs["take_down_released_Nmm"] = released
