@@ -64,7 +64,7 @@ from .cache import cached
 from .errors import InputError
 from .lookup import Lookup
 from .model.results import Status, set_status
-from .seams import seam_profile
+from .seams import seam_compression, seam_profile
 from .validate import check_choice, check_int, check_number, check_seed
 
 __all__ = ["LAW_STEPS", "LAW_STRAIN", "column_heights", "cushion_law", "engine_law", "macro_curve", "unseamed_law"]
@@ -100,8 +100,6 @@ def cushion_law(cell, *, seam_distance: float, strain: float = LAW_STRAIN, steps
     ``stress`` kPa over ``strain`` = plate travel / unseamed thickness), kept in the result cache
     (the sewn state too): the first call sews and presses (minutes), a repeated one costs
     milliseconds. A failed press is returned (with its status) and not stored on disk."""
-    from .seams import seam_compression
-
     kw = {"seam_distance": float(seam_distance), "strain": float(strain), "steps": int(steps)}
     if not cache:
         return seam_compression(cell, cache=False, **kw)

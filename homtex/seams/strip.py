@@ -32,9 +32,11 @@ from ..cells import Cell
 from ..errors import InputError
 from ..model.results import Status, set_status
 from ..validate import check_int, check_number
+from .compress import seam_compression, strain_levels
 from .foundation import seam_table
 from .measure import measure_profile
 from .press import press_sewn
+from .profile import seam_profile, sewn_seam
 from .sew import SewnSeam
 
 __all__ = ["strip_check", "strip_cushions", "sew_strip"]
@@ -45,8 +47,6 @@ log = logging.getLogger(__name__)
 def sew_strip(cell: Cell, *, seam_distance: float, prestrain, cache: bool = True, **kw) -> SewnSeam:
     """The strip of ``len(prestrain)`` seams, seam ``i`` sewn with ``prestrain[i]`` (length-controlled
     stitch), on the engine and from the result cache (:func:`homtex.seams.profile.sewn_seam`)."""
-    from .profile import sewn_seam
-
     eps = np.asarray(prestrain, dtype=float).reshape(-1)
     if eps.size < 2:
         raise InputError(f"a strip needs at least two seams (one pre-strain per seam), got {eps.size}")
@@ -92,9 +92,7 @@ def strip_check(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1
 
     ``curve``: the unseamed law of the column model (default the engine's, :func:`homtex.macro.engine_law`).
     """
-    from ..macro import macro_curve
-    from .compress import seam_compression, strain_levels
-    from .profile import seam_profile
+    from ..macro import macro_curve  # the macro layer is built on the seam models: a check of it is its client
 
     factors = np.asarray(factors, dtype=float).reshape(-1)
     if factors.size < 2 or not np.all((factors > 0) & np.isfinite(factors)):
