@@ -328,6 +328,25 @@ def test_macro_takes_the_step_count_or_a_stored_curve_and_prints_a_summary(tmp_p
     assert "not both" in capsys.readouterr().err
     assert main(["macro", "spacer_20mm", "--curve", str(tmp_path / "c" / "spacer_20mm_macro_noseam.png")]) == 2
     assert "not a compression curve" in capsys.readouterr().err
+    # --law cushion: every cushion on the sewn cell's own curve (a stand-in here, no sewing), the API's answer
+    import homtex
+    import homtex.macro as macro
+
+    cushion = xr.open_dataset(_linear_curve(tmp_path / "cushion.nc", modulus=60.0, end=0.7)).load()
+    asked = []
+    monkeypatch.setattr(macro, "cushion_law", lambda cell, **kw: asked.append(kw) or cushion)
+    assert main(["macro", "spacer_20mm", "--distance", "24", "--seam-method", "foundation", "--curve", str(law),
+                 "--law", "cushion", "--strain", "0.4", "--out", str(tmp_path / "d")]) == 0
+    api = homtex.macro_curve(homtex.load_cell("spacer_20mm"), seam_distance=24.0, curve=xr.open_dataset(law).load(),
+                             strain=0.4,
+                             law="cushion", cushion_curve=cushion, profile_options={"method": "foundation"})
+    with xr.open_dataset(tmp_path / "d" / "spacer_20mm_macro_24mm.nc") as ds:
+        assert ds.attrs["law"] == "cushion" and asked[0]["seam_distance"] == 24.0
+        np.testing.assert_allclose(ds.force.values, api.force.values, rtol=1e-12)
+        # without height scatter every cushion is the stand-in's: F = 12100 mm^2 x 60 kPa x eps / 1000
+        np.testing.assert_allclose(ds.force.values, 12.1 * 60.0 * ds.strain.values, rtol=1e-9)
+    assert main(["macro", "spacer_20mm", "--law", "cushion", "--curve", str(law)]) == 2
+    assert "--law cushion needs --distance" in capsys.readouterr().err
 
 
 def test_debug_shows_the_traceback_and_an_internal_error_says_so(tmp_path, capsys, monkeypatch):

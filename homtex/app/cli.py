@@ -5,7 +5,7 @@
     homtex homogenize CELL [--solver S] [--out DIR]   effective stiffness of a periodic cell
     homtex compress CELL [--strain 0.3] [--steps 20] [--geometry nonlinear|linear] [--friction MU] [--out DIR]
     homtex seam     CELL --distance D [--prestrain EPS] [--method yarn|foundation] [--out DIR]
-    homtex macro    CELL [--distance D] [--steps 35 | --curve FILE.nc] [--strain 0.5] [--scatter S] ...
+    homtex macro    CELL [--distance D] [--steps 35 | --curve FILE.nc] [--law columns|cushion] [--strain 0.5] ...
     homtex tensile  CELL --direction wale|course --strain S [--steps N] [--friction MU] [--out DIR]
     homtex study    STUDY.toml --out DIR [--scheduler ADDRESS] [--workers N] [--keep-failed] [--connect-timeout S]
     homtex plot     FILE.nc [--out IMAGE] [--var NAME] [--sel DIM=VALUE]
@@ -130,7 +130,7 @@ def cmd_macro(args) -> None:
                                  height_scatter=args.scatter, seed=args.seed, pre_stress=args.pre_stress,
                                  slack_travel=args.slack_travel, seam_method=args.seam_method,
                                  steps=args.steps, strain=args.strain,
-                                 curve=args.curve)
+                                 curve=args.curve, law=args.law)
     for p in paths:
         _say(f"  wrote {p}")
     _check_status(args, ds)
@@ -432,6 +432,11 @@ def build_parser() -> Parser:
     s.add_argument("--seam-method", choices=("yarn", "foundation"), default="yarn",
                    help="seam model that gives the cushion profile: yarn-level seam cell or the calibrated "
                         "foundation model (default: %(default)s)")
+    s.add_argument("--law", choices=("columns", "cushion"), default="columns",
+                   help="columns: every strip of the plate on the unseamed law from its own height (fast, no "
+                        "sewing); cushion: every cushion on the sewn seam cell's own yarn-level curve, shifted by its "
+                        "height (needs --distance; the first call sews and presses, minutes, then cached) "
+                        "(default: %(default)s)")
     _add_out(s, "results/macro")
     s.set_defaults(func=cmd_macro)
 

@@ -250,16 +250,20 @@ def macro_summary(ds) -> str:
 
 
 def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=0, pre_stress="thread",
-               slack_travel=None, seam_method="yarn", steps=None, strain=None, curve=None):
+               slack_travel=None, seam_method="yarn", steps=None, strain=None, curve=None, law="columns"):
     """Macro cushion layer of a seamed specimen under the 121 cm^2 plate:
     ``<stem>_macro_<noseam|d mm>.nc/.png``. The unseamed compression law comes from ``curve``
     (a stored ``homtex compress`` netCDF file) or is the large-motion engine's curve to 70 % in
     ``steps`` plate steps (default 35), as ``macro_curve(cell)`` computes it
     (:func:`homtex.macro.engine_law`, cached): the command and the API give the same answer.
     ``strain``: final punch travel / thickness (default 0.5; with a stored curve, where it ends, at most
-    0.5). Returns (Dataset, [paths], summary line)."""
+    0.5). ``law``: macro_curve's ``law`` ("columns" or "cushion"). Returns (Dataset, [paths], summary line)."""
 
     cell = load(path)
+    mode, law = law, None                 # (below, ``law`` is the unseamed compression law)
+    if mode == "cushion" and seam_distance is None:
+        raise InputError("--law cushion needs --distance (the seam distance, mm): without seams every column "
+                         "follows the unseamed law (--law columns)")
     if curve is not None:
         law = _stored_curve(curve)
         if strain is None:
@@ -274,7 +278,7 @@ def macro_cell(path, out: Path, *, seam_distance=None, height_scatter=0.0, seed=
         source = f"computed, the large-motion engine to {100 * to:g} % in {n} plate steps"
     ds = macro_curve(cell, seam_distance=seam_distance, height_scatter=height_scatter, seed=seed,
                      pre_stress=pre_stress, slack_travel=slack_travel, curve=law, strain=strain,
-                     profile_options={"method": seam_method})
+                     profile_options={"method": seam_method}, law=mode)
     ds.attrs.update(seam_method=seam_method, compression_law=source)
     describe(ds, "macro_curve", cell)
     out = Path(out)
