@@ -1,4 +1,5 @@
-"""Smoke tests of the contact studies' quick modes (they write what they say)."""
+"""The contact enforcement study's quick mode, in-process, with its physics asserted (tests/test_studies.py
+runs every other script's quick mode)."""
 
 import importlib.util
 from pathlib import Path
@@ -26,9 +27,3 @@ def test_contact_enforcement_quick(tmp_path):
     assert "units" in ds.gap_error.attrs and "problem" in ds.dims
     assert "converged" in mod.summary(ds)
 
-
-@pytest.mark.slow
-def test_bench_contact_kernels_quick(tmp_path):
-    ds = load("bench_contact_kernels").run(tmp_path, (12,), repeat=1)
-    assert (tmp_path / "bench_contact_kernels.nc").exists()
-    assert int(ds.pairs[0]) > 0 and bool((ds.seconds > 0).all())

@@ -25,6 +25,10 @@ SCRIPTS = sorted(p for folder in FOLDERS for p in (STUDIES / folder).glob("*.py"
 CONFIGS = sorted((STUDIES / "configs").glob("*.toml"))
 # optional packages a script needs beyond homtex's own dependencies
 NEEDS = {"bench_core.py": ("psutil",), "bench_corotational.py": ("openseespy.opensees",)}
+# scripts whose quick mode a test runs in-process with physics asserted (tests/test_contact_studies.py):
+# not run a second time here
+IN_PROCESS = {"contact_enforcement.py"}
+QUICK = [p for p in SCRIPTS if p.name not in IN_PROCESS]
 
 
 def _id(p: Path) -> str:
@@ -54,7 +58,7 @@ def test_layout():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("script", SCRIPTS, ids=_id)
+@pytest.mark.parametrize("script", QUICK, ids=_id)
 def test_quick_mode(script, tmp_path):
     for mod in NEEDS.get(script.name, ()):
         pytest.importorskip(mod)

@@ -8,7 +8,8 @@ friction); the limit is the first strain where |stress_linear / stress_engine - 
 (linear interpolation between levels). The value goes into the cell file's ``[validity]`` table
 (``linear_strain_limit``), which ``compress(geometry="linear")`` reads: a curve that goes beyond it
 is "flagged" with the limit named. Cells that plates cannot compress (3-periodic lattices, planar
-lattices in x-y) have no such limit.
+lattices in x-y) have no such limit; nor do the weft knits, which homtex pulls (``homtex.tensile``, on the
+engine only) rather than presses.
 
 Usage::
 
@@ -42,6 +43,8 @@ def limit(strain, linear, engine, tol=TOLERANCE) -> float:
 
 
 def compressible(cell) -> bool:
+    if {"rest", "pattern"} <= set(getattr(cell, "info", {})):
+        return False            # a weft knit: tested in tension on the engine (homtex.tensile), not pressed
     fr = cell.frame
     if fr.dim_periodic == 3:
         return False
