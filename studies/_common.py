@@ -40,6 +40,23 @@ def parser(file: str, doc: str | None, **kw) -> argparse.ArgumentParser:
     return p
 
 
+def add_docs_option(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """``--no-docs``: a full run does not copy its charts to docs/studies/ (see :func:`publish`)."""
+    p.add_argument("--no-docs", action="store_true", help="do not copy the charts to docs/studies/")
+    return p
+
+
+def publish(args, *charts) -> None:
+    """Copy the charts of a full run into docs/studies/ (not with --quick or --no-docs)."""
+    import shutil
+
+    if getattr(args, "quick", False) or getattr(args, "no_docs", False):
+        return
+    (DOCS / "studies").mkdir(exist_ok=True)
+    for c in charts:
+        shutil.copy(c, DOCS / "studies" / Path(c).name)
+
+
 def setup(args, *, quiet_warnings: bool = True) -> Path:
     """Check and create ``args.out``, show the package's log messages; returns the folder.
 

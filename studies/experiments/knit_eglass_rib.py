@@ -26,7 +26,6 @@ charts to docs/studies/ (not with --quick). Full run: several minutes on the 2-c
 from __future__ import annotations
 
 import logging
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -38,7 +37,7 @@ import homtex
 from homtex.knits.charts import energy_split_chart, knit_picture, state_frame, tensile_chart, write_state_vtk
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _common import DOCS, parser, save_figure, save_netcdf, setup  # noqa: E402
+from _common import add_docs_option, parser, publish, save_figure, save_netcdf, setup  # noqa: E402
 
 log = logging.getLogger("studies")
 FRICTIONS = (0.0, 0.5)
@@ -62,9 +61,7 @@ def ratios(ds) -> dict:
 
 
 def main(argv=None):
-    p = parser(__file__, __doc__)
-    p.add_argument("--no-docs", action="store_true", help="do not copy the charts to docs/studies/")
-    args = p.parse_args(argv)
+    args = add_docs_option(parser(__file__, __doc__)).parse_args(argv)
     out = setup(args)
     strain, steps = (0.02, 1) if args.quick else (0.45, 45)
     cell = homtex.load_cell("rib_1x1_eglass")
@@ -119,10 +116,7 @@ def main(argv=None):
         write_state_vtk(frame, ds.x.values[k], P, ds.element_energy.values[k],
                         out / "vtk" / f"knit_eglass_rib_{int(round(100 * s))}.vtu")
     charts += pics
-    if not args.quick and not args.no_docs:
-        (DOCS / "studies").mkdir(exist_ok=True)
-        for c in charts:
-            shutil.copy(c, DOCS / "studies" / Path(c).name)
+    publish(args, *charts)
     return runs
 
 

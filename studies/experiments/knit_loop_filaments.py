@@ -25,7 +25,6 @@ docs/studies/ (not with --quick). Full run: a few minutes of CPU on the 2-core m
 from __future__ import annotations
 
 import logging
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -36,7 +35,7 @@ import xarray as xr
 import homtex
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _common import DOCS, parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+from _common import add_docs_option, parser, publish, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 log = logging.getLogger("studies")
 LOOPS = (5.5, 6.5, 8.0)          # mm
@@ -126,9 +125,7 @@ def chart(ds: xr.Dataset, path):
 
 
 def main(argv=None):
-    p = parser(__file__, __doc__)
-    p.add_argument("--no-docs", action="store_true", help="do not copy the chart to docs/studies/")
-    args = p.parse_args(argv)
+    args = add_docs_option(parser(__file__, __doc__)).parse_args(argv)
     out = setup(args)
     loops, fils, strain, steps, element = ((LOOPS[1:], FILAMENTS[1:], 0.1, 1, 0.65) if args.quick
                                            else (LOOPS, FILAMENTS, 0.4, 8, None))
@@ -148,9 +145,7 @@ def main(argv=None):
     path = chart(ds, out / "knit_loop_filaments.png")
     log.info("log-log slope of force per width on Xcf: %s",
              {k: round(v, 3) for k, v in ds.attrs.items() if k.startswith("slope")})
-    if not args.quick and not args.no_docs:
-        (DOCS / "studies").mkdir(exist_ok=True)
-        shutil.copy(path, DOCS / "studies" / path.name)
+    publish(args, path)
     return ds
 
 

@@ -26,7 +26,6 @@ about ten minutes of CPU on the 2-core machine (the 0.1 mm rib most of it).
 from __future__ import annotations
 
 import logging
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -37,7 +36,7 @@ import xarray as xr
 import homtex
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _common import DOCS, parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+from _common import add_docs_option, parser, publish, pyplot, save_figure, save_netcdf, setup  # noqa: E402
 
 log = logging.getLogger("studies")
 CELLS = ("jersey_eglass", "rib_1x1_eglass")
@@ -123,9 +122,7 @@ def chart(ds: xr.Dataset, path):
 
 
 def main(argv=None):
-    p = parser(__file__, __doc__)
-    p.add_argument("--no-docs", action="store_true", help="do not copy the chart to docs/studies/")
-    args = p.parse_args(argv)
+    args = add_docs_option(parser(__file__, __doc__)).parse_args(argv)
     out = setup(args)
     cells, lengths, strain, steps = ((CELLS[:1], (0.65, 0.4), 0.04, 2) if args.quick
                                      else (CELLS, LENGTHS, 0.4, 8))
@@ -154,9 +151,7 @@ def main(argv=None):
                  np.array2string(d.force_error_early.values, precision=4), np.array2string(d.strain_at_1Nmm.values,
                                                                                      precision=4),
                  np.array2string(d.wale_spacing_mm.values, precision=4), np.array2string(d.cpu_s.values, precision=1))
-    if not args.quick and not args.no_docs:
-        (DOCS / "studies").mkdir(exist_ok=True)
-        shutil.copy(path, DOCS / "studies" / path.name)
+    publish(args, path)
     return ds
 
 
