@@ -227,17 +227,18 @@ def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0,
     :func:`macro_curve`, every column on the cushion's own curve shifted by its cushion's height
     difference (NaN past the curve's end)."""
     t0 = time.perf_counter()
+    shift = cushion_shifts(cushion, height_scatter, seed) / H0      # (n_columns,) strain
+    need = eps_end + max(float(shift.max(initial=0.0)), 0.0)     # the tallest cushion is the furthest in
     if cushion_curve is None:
         if cell is None:
             raise InputError("macro_curve(law='cushion'): give a cell or a cushion_curve")
-        # pressed as far as asked, in the default law's 2 % plate steps (the sewn d = 24 mm cell is
-        # followed to 64 %, docs/seams.md; a press that fails is not kept on disk)
-        n = max(1, int(round(float(strain) * LAW_STEPS / LAW_STRAIN)))
-        cushion_curve = cushion_law(cell, seam_distance=float(seam_distance), strain=float(strain), steps=n)
+        # pressed as far as the tallest cushion goes, in the default law's 2 % plate steps (the sewn
+        # d = 24 mm cell is followed to 64 %, docs/seams.md; a press that fails is not kept on disk)
+        dstep = LAW_STRAIN / LAW_STEPS
+        n = max(1, math.ceil(min(need, 0.98) / dstep - 1e-9))
+        cushion_curve = cushion_law(cell, seam_distance=float(seam_distance), strain=n * dstep, steps=n)
     t_curve = time.perf_counter() - t0
     claw, c_max = unseamed_law(cushion_curve)
-    shift = cushion_shifts(cushion, height_scatter, seed) / H0      # (n_columns,) strain
-    need = eps_end + max(float(shift.max(initial=0.0)), 0.0)     # the tallest cushion is the furthest in
     fail = ""
     if c_max < need - 1e-12:
         attrs = getattr(cushion_curve, "attrs", {})

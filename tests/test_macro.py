@@ -249,7 +249,7 @@ def test_the_default_law_is_the_engines_curve_to_70_percent_computed_once(monkey
     cache.clear_cache()
 
 
-def test_cushion_law_is_the_cushion_curve_shifted_by_each_cushions_height():
+def test_cushion_law_is_the_cushion_curve_shifted_by_each_cushions_height(monkeypatch):
     """law="cushion": every cushion follows the seamed cushion's own curve; without scatter the
     plate's stress is that curve, with scatter each cushion's curve is shifted by its height
     difference delta_k (a linear curve sigma = K eps, none before contact, gives the closed form
@@ -276,5 +276,20 @@ def test_cushion_law_is_the_cushion_curve_shifted_by_each_cushions_height():
     assert np.ptp(d) > 1.0 and np.any(sc.stress.values != ds.stress.values)
     short = macro_curve(**{**kw, "strain": 0.9})
     assert short.attrs["status"] == "failed" and "cushion's curve ends" in short.attrs["status_detail"]
+    # computed from the cell, the cushion's curve is pressed as far as the tallest cushion goes
+    asked = []
+
+    def law(cell, *, seam_distance, strain, steps):
+        asked.append((strain, steps))
+        return cc
+
+    import homtex.macro as macro
+
+    monkeypatch.setattr(macro, "cushion_law", law)
+    computed = macro_curve(cell=object(), **{**kw, "cushion_curve": None}, height_scatter=1.5, seed=3)
+    (to, n), = asked
+    assert to >= 0.5 + d.max() / H0 and to - 0.02 < 0.5 + d.max() / H0 and to == pytest.approx(0.02 * n)
+    assert computed.attrs["status"] == "ok"
+    np.testing.assert_allclose(computed.stress.values, sc.stress.values, atol=1e-12)
     with pytest.raises(InputError, match="needs seam_distance"):
         macro_curve(curve=linear, thickness=H0, law="cushion")
