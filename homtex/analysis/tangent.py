@@ -130,6 +130,7 @@ class FreeSystem:
             raise ValueError("couplings need method 'ldl'")
         self._fidx = fidx
         indptr, indices, self.emap, self._ukey = _slots(frame, fidx, upper=True, couplings=couplings)
+        self._slot_cache: dict = {}             # (shape, hash) -> (nodes, slots) of recent block_slots calls
         self.A = sp.csc_matrix((np.zeros(len(indices)), indices, indptr), shape=(nf, nf))
         self.full_map = None
         if self.method == "lu":
@@ -172,6 +173,10 @@ class FreeSystem:
         pattern (its node pairs were not among the ``couplings``): SolverError, or with
         ``strict=False`` None."""
         nd = np.asarray(nodes, dtype=np.int64)
+        memo = (nd.shape, hash(nd.tobytes()))
+        hit = self._slot_cache.get(memo)
+        if hit is not None and np.array_equal(hit[0], nd):
+            return hit[1]           # a Newton iteration's contact set is mostly the previous one's
         na, S = nd.shape
         dof = (6 * nd[:, :, None] + np.arange(3)).reshape(na, 3 * S)
         fg = self._fidx[dof]
@@ -187,6 +192,10 @@ class FreeSystem:
             raise SolverError("a contact block lies outside the tangent's pattern (couplings missing)")
         out = np.full((na, 3 * S, 3 * S), -1, dtype=np.int32)
         out[keep] = pos.astype(np.int32)
+        out.flags.writeable = False             # shared with the next call for the same nodes
+        if len(self._slot_cache) >= 8:          # pairs, plates, friction, terms: a few live sets
+            self._slot_cache.clear()
+        self._slot_cache[memo] = (nd.copy(), out)
         return out
 
     def add_blocks(self, blocks: np.ndarray, slots: np.ndarray) -> None:

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, SolverError
 from .ipc_scene import ContactScene
 
 __all__ = ["Lattice", "LatticeDriver", "LatticeScene"]
@@ -136,7 +136,8 @@ class LatticeDriver:
         self.img_el = np.flatnonzero(np.any(self.images != 0, axis=1))
         self.base = np.zeros(0, dtype=np.int64)
         self.img = np.zeros((0, self.k), dtype=np.int64)
-        self._key: dict = {}
+        self._codes = np.zeros(0, dtype=np.int64)     # sorted codes of the registered (node, image) keys
+        self._ids = np.zeros(0, dtype=np.int64)       # their virtual node numbers (- n)
         self.target = self.periods.copy()
 
     # ------------------------------------------------------------------ virtual nodes
@@ -197,16 +198,33 @@ class LatticeDriver:
         hit = np.any(slot_img != 0, axis=2)
         q, s = np.nonzero(hit)
         nodes = st.nodes
-        for qq, ss in zip(q, s):
-            key = (int(nodes[qq, ss]), *slot_img[qq, ss].tolist())
-            v = self._key.get(key)
-            if v is None:
-                v = len(self._key)
-                self._key[key] = v
-                self.base = np.r_[self.base, key[0]]
-                self.img = np.vstack([self.img, np.array(key[1:], dtype=np.int64)[None]])
-            nodes[qq, ss] = self.n + v
+        node, img = nodes[q, s].astype(np.int64), slot_img[q, s]
+        code = self._code(node, img)
+        # register the keys seen for the first time, in order of first appearance
+        uc, first = np.unique(code, return_index=True)
+        pos = np.searchsorted(self._codes, uc)
+        known = (pos < len(self._codes)) & (self._codes[np.minimum(pos, len(self._codes) - 1)] == uc) \
+            if len(self._codes) else np.zeros(len(uc), dtype=bool)
+        if not known.all():
+            fresh = np.sort(first[~known])                      # hit indices, first appearance first
+            ids = len(self.base) + np.arange(len(fresh))
+            self.base = np.r_[self.base, node[fresh]]
+            self.img = np.vstack([self.img, img[fresh]])
+            codes = np.r_[self._codes, code[fresh]]
+            order = np.argsort(codes, kind="stable")
+            self._codes, self._ids = codes[order], np.r_[self._ids, ids][order]
+        nodes[q, s] = self.n + self._ids[np.searchsorted(self._codes, code)]
         st.shift[hit] = 0.0
+
+    def _code(self, node: np.ndarray, img: np.ndarray) -> np.ndarray:
+        """One int64 per (node, image) key (images within +-2047 periods, nodes below 2**62 / 4096**k)."""
+        if len(img) and np.abs(img).max() > 2047:
+            raise SolverError(f"a contact reaches {int(np.abs(img).max())} periods away from its cell: the "
+                              "lattice has collapsed (a period near zero)")
+        code = node.copy()
+        for i in range(self.k):
+            code = code * 4096 + (img[:, i] + 2048)
+        return code
 
     # ------------------------------------------------------------------ elements
     def element_grad(self, fe: np.ndarray) -> np.ndarray:

@@ -86,14 +86,18 @@ class BorderedSystem:
         sel = np.flatnonzero(np.any(W != 0, axis=(1, 2)))
         if not len(sel):
             return
-        S = nodes.shape[1]
-        Hr = H[sel].reshape(len(sel), S, 3, S, 3)
+        n, S, k = len(sel), nodes.shape[1], self.lat.k
+        Hr = H[sel].reshape(n, S, 3, S, 3)
         W = W[sel].astype(float)
         real = self.lat.real(nodes[sel])
-        part = np.einsum("apiqj,aqk->apikj", Hr, W).reshape(len(sel), 3 * S, self.lat.k, 3)
-        dof = (6 * real[:, :, None] + np.arange(3)).reshape(len(sel), 3 * S)
-        self._add_rows(dof, part)
-        self.C += np.einsum("apk,apiqj,aql->kilj", W, Hr, W).reshape(self.C.shape)
+        # P[a, p, i, l, j] = sum_q Hr[a, p, i, q, j] W[a, q, l] and C[k, i, l, j] += sum_{a, p} W[a, p, k]
+        # P[a, p, i, l, j]: a batched matmul and a tensordot (BLAS), not einsum's loops (thousands of
+        # contact pairs in a knit cell made these a fifth of a Newton iteration)
+        P = np.matmul(Hr.transpose(0, 1, 2, 4, 3).reshape(n, 9 * S, S), W)
+        P = P.reshape(n, S, 3, 3, k).transpose(0, 1, 2, 4, 3)
+        dof = (6 * real[:, :, None] + np.arange(3)).reshape(n, 3 * S)
+        self._add_rows(dof, np.ascontiguousarray(P).reshape(n, 3 * S, k, 3))
+        self.C += np.tensordot(W, P, axes=([0, 1], [0, 1])).reshape(self.C.shape)
 
     def block_slots(self, nodes, strict: bool = True):
         return self.inner.block_slots(nodes, strict=strict)
