@@ -127,7 +127,7 @@ def chart(ds: xr.Dataset, path):
 def main(argv=None):
     args = add_docs_option(parser(__file__, __doc__)).parse_args(argv)
     out = setup(args)
-    loops, fils, strain, steps, element = ((LOOPS[1:], FILAMENTS[1:], 0.1, 1, 0.65) if args.quick
+    loops, fils, strain, steps, element = ((LOOPS[1:2], FILAMENTS[1:], 0.1, 1, 0.65) if args.quick
                                            else (LOOPS, FILAMENTS, 0.4, 8, None))
     rows = [xr.concat([run_one(loop, n, strain, steps, element) for n in fils], dim="filaments", join="outer")
             for loop in loops]

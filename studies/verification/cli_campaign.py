@@ -5,7 +5,7 @@ inputs (a cell named ``../outside/escaped``) check that the guards do not refuse
 that nothing is written outside ``--out``.
 
 Usage: python studies/verification/cli_campaign.py [--out DIR] [--quick]
-       (default results/cli_campaign/; --quick: one invocation in ten, under a minute)
+       (default results/cli_campaign/; --quick: one invocation in twenty, under half a minute)
 
 Writes DIR/cli_campaign.nc (one row per invocation: command, expectation, exit status,
 outcome, seconds, the last line of stderr) and DIR/cli_campaign.png (outcomes per subcommand),
@@ -259,7 +259,7 @@ def main(argv=None):
         tmp = Path(tmpname)
         cases = invocations(_fixtures(tmp))
         if quick:
-            cases = cases[::10]
+            cases = cases[::20]
         for i, (label, cmd, expected) in enumerate(cases):
             rc, text, last, sec = run(cmd)
             outcome = classify(expected, rc, text)
