@@ -75,8 +75,9 @@ def chart(ds: xr.Dataset, path):
     bx.set_xscale("log")
     bx.set_yscale("log")
     bx.set_xlabel("beam elements in the cell")
-    bx.set_ylabel("CPU per Newton iteration, ms")
-    bx.set_title("cost per Newton iteration (assembly, contact, factorisation)", fontsize=9)
+    bx.set_ylabel("CPU per counted Newton iteration, ms")
+    bx.set_title("CPU over the accepted steps' Newton iterations (a test's also pays\n"
+                 "for halved sub-steps, buckling checks and perturbations)", fontsize=9)
     bx.grid(alpha=0.3, which="both")
     fig.tight_layout()
     return save_figure(fig, path)
