@@ -304,6 +304,46 @@ def _add_out(s, default: str) -> None:
 
 
 
+def _add_macro(sub) -> None:
+    s = sub.add_parser("macro", help="force-compression curve of a seamed specimen (cushion layer)",
+                       description="Macro cushion layer: force over punch travel of a (seamed) specimen under "
+                       "the 121 cm^2 plate, with a summary line (max force, force at 30 %, first contact): "
+                       "<cell file stem>_macro_<noseam|d mm>.nc/.png.")
+    s.add_argument("cell", metavar="CELL", help=CELL_HELP + "; a spacer cell (spacer_20mm)")
+    s.add_argument("--distance", type=positive, default=None, metavar="D",
+                   help="seam distance, mm, > 0 (default: no seams)")
+    s.add_argument("--steps", type=count, default=None, metavar="N",
+                   help="plate steps of the unseamed compression law, the large-motion engine's curve to 70 %% "
+                        "with the cell file's friction, as macro_curve computes it (kept in the result cache), "
+                        "integer >= 1 (default: 35)")
+    s.add_argument("--curve", metavar="FILE.nc", default=None,
+                   help="a stored compression law instead: the .nc file `homtex compress` writes (default: none, "
+                        "computed with --steps)")
+    s.add_argument("--strain", type=fraction, default=None, metavar="EPS",
+                   help="final punch travel / thickness, a fraction in (0, 1) (default: 0.5; with --curve where the "
+                        "curve ends, at most 0.5)")
+    s.add_argument("--scatter", type=non_negative, default=0.0, metavar="MM",
+                   help="standard deviation of the cushion-to-cushion height, mm, >= 0 (default: %(default)s)")
+    s.add_argument("--seed", type=seed, default=0, metavar="N",
+                   help="random seed of the height scatter, integer >= 0 (default: %(default)s)")
+    s.add_argument("--pre-stress", choices=("thread", "held", "released"), default="thread",
+                   help="who carries a pre-compressed cushion's pre-load under the punch: the thread hands it "
+                        "over within its slack travel (thread), keeps it (held) or drops it at contact (released) "
+                        "(default: %(default)s)")
+    s.add_argument("--slack-travel", type=length_or_inf, default=None, metavar="MM",
+                   help="thread slack travel, mm, >= 0 or inf (default: from the seam profile)")
+    s.add_argument("--seam-method", choices=("yarn", "foundation"), default="yarn",
+                   help="seam model that gives the cushion profile: yarn-level seam cell or the calibrated "
+                        "foundation model (default: %(default)s)")
+    s.add_argument("--law", choices=("columns", "cushion"), default="columns",
+                   help="columns: every strip of the plate on the unseamed law from its own height (fast, no "
+                        "sewing); cushion: every cushion on the sewn seam cell's own yarn-level curve, shifted by its "
+                        "height (needs --distance; the first call sews and presses, minutes, then cached) "
+                        "(default: %(default)s)")
+    _add_out(s, "results/macro")
+    s.set_defaults(func=cmd_macro)
+
+
 def _add_tensile(sub) -> None:
     """The ``tensile`` subcommand (its own function: build_parser stays readable)."""
     s = sub.add_parser("tensile", help="tensile test of a weft-knit cell along the wales or the courses",
@@ -402,44 +442,7 @@ def build_parser() -> Parser:
     _add_out(s, "results/seam")
     s.set_defaults(func=cmd_seam)
 
-    s = sub.add_parser("macro", help="force-compression curve of a seamed specimen (cushion layer)",
-                       description="Macro cushion layer: force over punch travel of a (seamed) specimen under "
-                       "the 121 cm^2 plate, with a summary line (max force, force at 30 %, first contact): "
-                       "<cell file stem>_macro_<noseam|d mm>.nc/.png.")
-    s.add_argument("cell", metavar="CELL", help=CELL_HELP + "; a spacer cell (spacer_20mm)")
-    s.add_argument("--distance", type=positive, default=None, metavar="D",
-                   help="seam distance, mm, > 0 (default: no seams)")
-    s.add_argument("--steps", type=count, default=None, metavar="N",
-                   help="plate steps of the unseamed compression law, the large-motion engine's curve to 70 %% "
-                        "with the cell file's friction, as macro_curve computes it (kept in the result cache), "
-                        "integer >= 1 (default: 35)")
-    s.add_argument("--curve", metavar="FILE.nc", default=None,
-                   help="a stored compression law instead: the .nc file `homtex compress` writes (default: none, "
-                        "computed with --steps)")
-    s.add_argument("--strain", type=fraction, default=None, metavar="EPS",
-                   help="final punch travel / thickness, a fraction in (0, 1) (default: 0.5; with --curve where the "
-                        "curve ends, at most 0.5)")
-    s.add_argument("--scatter", type=non_negative, default=0.0, metavar="MM",
-                   help="standard deviation of the cushion-to-cushion height, mm, >= 0 (default: %(default)s)")
-    s.add_argument("--seed", type=seed, default=0, metavar="N",
-                   help="random seed of the height scatter, integer >= 0 (default: %(default)s)")
-    s.add_argument("--pre-stress", choices=("thread", "held", "released"), default="thread",
-                   help="who carries a pre-compressed cushion's pre-load under the punch: the thread hands it "
-                        "over within its slack travel (thread), keeps it (held) or drops it at contact (released) "
-                        "(default: %(default)s)")
-    s.add_argument("--slack-travel", type=length_or_inf, default=None, metavar="MM",
-                   help="thread slack travel, mm, >= 0 or inf (default: from the seam profile)")
-    s.add_argument("--seam-method", choices=("yarn", "foundation"), default="yarn",
-                   help="seam model that gives the cushion profile: yarn-level seam cell or the calibrated "
-                        "foundation model (default: %(default)s)")
-    s.add_argument("--law", choices=("columns", "cushion"), default="columns",
-                   help="columns: every strip of the plate on the unseamed law from its own height (fast, no "
-                        "sewing); cushion: every cushion on the sewn seam cell's own yarn-level curve, shifted by its "
-                        "height (needs --distance; the first call sews and presses, minutes, then cached) "
-                        "(default: %(default)s)")
-    _add_out(s, "results/macro")
-    s.set_defaults(func=cmd_macro)
-
+    _add_macro(sub)
     _add_tensile(sub)
 
     s = sub.add_parser("study", help="run a parameter study (resumable)",
