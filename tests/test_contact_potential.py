@@ -327,6 +327,45 @@ def test_parallel_transition_is_continuous():
     assert E[0] > 5 * E[-1]                     # the parallel form carries the line contact
 
 
+@pytest.mark.parametrize("deg", [0.2, 0.45, 0.9])
+def test_thin_filaments_crossing_nearly_parallel_see_the_barrier(deg):
+    """Two filaments (r = 8.5 um) on 0.2 mm elements crossing at their middles at under a degree:
+    their end points, where the nodal (parallel) form looks, are farther apart than the crossing
+    by the sagitta (L sin theta)^2 / (8 r_sum), about ghat at 0.9 deg. With the elements' lengths
+    (the per-pair blend angles) the energy at the crossing is at least the barrier's at
+    parallel_sagitta x ghat in the nodal form (0.2 deg), the blend (0.45) and the crossing form
+    (0.9); with the global angles the 0.9 deg crossing is almost invisible (a 3-filament jersey
+    stalled on it: the collision check stopped what the potential did not push apart)."""
+    L, r, ghat = 0.2, 0.0085, 8.5e-5
+    enf = Enforcement("barrier", ghat=ghat, kappa=1.0)
+    th = np.radians(deg)
+    u = np.array([np.cos(th), np.sin(th), 0.0])
+    up = np.array([0.0, 0.0, 2 * r + 1e-3 * ghat])          # 1e-3 ghat apart at the crossing
+    x = np.array([[-L / 2, 0, 0], [L / 2, 0, 0], -L / 2 * u + up, L / 2 * u + up])
+    el, rad = [[0, 1], [2, 3]], np.full(2, r)
+    per_pair = pair_stencil(el, rad, [0], [1], length=np.full(2, L))
+    c0, c1 = enf.pair_c_range(per_pair)
+    assert c0[0] < enf.c_range[0] and c1[0] / c0[0] == pytest.approx(enf.c_range[1] / enf.c_range[0])
+    E = float(pair_potential(x, per_pair, enf, hessian=False).energy)
+    assert E >= enf.energy(enf.parallel_sagitta * ghat)[0]
+    if deg == 0.9:
+        E_global = float(pair_potential(x, pair_stencil(el, rad, [0], [1]), enf, hessian=False).energy)
+        assert E_global < 0.01 * E            # a 300th
+
+
+def test_per_pair_blend_angles_stay_global_for_short_elements():
+    """Elements a few radii long (every shipped equivalent-yarn cell): the per-pair angles are the
+    global ones, so those models are unchanged."""
+    enf = Enforcement("barrier", ghat=0.01 * 0.04, kappa=1.0)
+    st = pair_stencil([[0, 1], [2, 3]], np.full(2, 0.04), [0], [1], length=np.full(2, 0.2))
+    c0, c1 = enf.pair_c_range(st)
+    assert (c0[0], c1[0]) == enf.c_range
+    with pytest.raises(InputError, match="length"):
+        pair_stencil([[0, 1], [2, 3]], np.full(2, 0.04), [0], [1], length=np.array([0.2, -1.0]))
+    with pytest.raises(InputError, match="parallel_sagitta"):
+        Enforcement(parallel_sagitta=0.0)
+
+
 def test_periodic_image_pair_equals_explicit_copy():
     enf = Enforcement("penalty", ghat=0.05, kappa=50.0)
     period = np.array([[3.0, 0.0, 0.0]])

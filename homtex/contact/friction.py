@@ -115,7 +115,7 @@ def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0,
         q = idx[r]
         _load_stencil(x, nodes, shift, q, P)
         d2e, es, et, ecase = _ee_classify(P)
-        w, w1, w2 = _blend(_sin2_angle(P, gc, Hc, 0), c0, c1)
+        w, w1, w2 = _blend(_sin2_angle(P, gc, Hc, 0), c0[q], c1[q])
         for j in range(9):
             lam[r, j] = 0.0
             W, Wp = _term_weights(j, w, alpha[q], beta[q])
@@ -317,7 +317,7 @@ def pair_friction_lag(x_lag, stencil: PairStencil, enforcement: Enforcement, mu=
     if na:
         if enforcement.kind in ("barrier", "shell") and from_gap[idx].min() <= 0:
             raise InputError("x_lag: a pair's gap is <= 0, where the barrier is infinite")
-        c0, c1 = enforcement.c_range
+        c0, c1 = enforcement.pair_c_range(stencil)
         _pair_lag(x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
                   enforcement.code, enforcement.params, enforcement.cutoff, c0, c1, lam, coef, T)
     return FrictionLag(nodes=stencil.nodes[idx], coef=coef, basis=T, lam=lam, mu=mu_c[idx], index=idx,

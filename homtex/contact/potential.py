@@ -140,6 +140,13 @@ class Enforcement:
     parallel_deg : (theta0, theta1) degrees: pairs closer to parallel than theta0 use the
         nodal (line-contact) form, pairs beyond theta1 the crossing form, a C2 blend between.
     project : project each pair's 12 x 12 Hessian block to positive semi-definite.
+    parallel_sagitta : the nodal form's worst error at a crossing, as a share of ghat (> 0): two
+        segments of length L at an angle theta crossing at their middles are (L sin theta)^2 /
+        (8 r_sum) farther apart at their end points than at the crossing, where the nodal form looks;
+        a pair whose longer element makes that exceed parallel_sagitta x ghat at theta0 gets both
+        angles lowered by the same factor (:meth:`pair_c_range`). Thin filaments on long elements
+        otherwise pass through each other unseen by the potential (the collision check stops them
+        and Newton stalls).
     """
 
     kind: str = "barrier"
@@ -150,6 +157,7 @@ class Enforcement:
     shell: float = 0.0
     shell_stiffness: float = 0.0
     shell_exponent: float = 1.0
+    parallel_sagitta: float = 0.3
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -165,6 +173,8 @@ class Enforcement:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise InputError(f"Enforcement.{name} must be positive and finite, got {v!r}")
+        if not (np.isfinite(self.parallel_sagitta) and self.parallel_sagitta > 0):
+            raise InputError(f"Enforcement.parallel_sagitta must be positive and finite, got {self.parallel_sagitta!r}")
         t0, t1 = (float(v) for v in self.parallel_deg)
         if not (0.0 <= t0 < t1 < 90.0):
             raise InputError(f"Enforcement.parallel_deg must satisfy 0 <= theta0 < theta1 < 90, got "
@@ -188,6 +198,19 @@ class Enforcement:
     def c_range(self):
         t0, t1 = np.radians(np.asarray(self.parallel_deg, dtype=float))
         return float(np.sin(t0) ** 2), float(np.sin(t1) ** 2)
+
+    def pair_c_range(self, stencil: "PairStencil") -> tuple:
+        """((c,), (c,)) sin^2 of the blend angles of every pair of ``stencil``: :attr:`c_range`,
+        both lowered by one factor where the nodal form's error at a crossing (the sagitta (L^2 c0) /
+        (8 r_sum) of the longer element L) would exceed ``parallel_sagitta`` x ghat."""
+        c0, c1 = self.c_range
+        n = len(stencil)
+        scale = np.ones(n)
+        if stencil.length2 is not None and n and c0 > 0:
+            with np.errstate(divide="ignore"):
+                limit = 8.0 * self.parallel_sagitta * self.ghat * stencil.rsum / stencil.length2
+            scale = np.minimum(1.0, limit / c0)
+        return np.ascontiguousarray(c0 * scale), np.ascontiguousarray(c1 * scale)
 
     def energy(self, g):
         """(energy N mm, d/dg N, d2/dg2 N/mm) at gaps g (any shape, mm)."""
@@ -351,8 +374,8 @@ def _pair_eval_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0
     for r in range(lo, hi):
         q = idx[r]
         _load_stencil(x, nodes, shift, q, P)
-        E, lam, gap, nterm, s, t, fs, ft = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kp, ghat, c0,
-                                                        c1, hess, g_out[r], Hl, tg, tH, gc, Hc, Gp)
+        E, lam, gap, nterm, s, t, fs, ft = _pair_energy(P, rsum[q], alpha[q], beta[q], kind, kp, ghat, c0[q],
+                                                        c1[q], hess, g_out[r], Hl, tg, tH, gc, Hc, Gp)
         e_out[r] = E
         lam_out[r] = lam
         if hess:
@@ -399,6 +422,8 @@ class PairStencil:
     nodes (c, 4) node indices; shift (c, 4, 3) constant offsets (periodic images, mm): the
     stencil's points are x[nodes] + shift. rsum (c,) r_a + r_b (mm); alpha, beta (c, 4) node
     weights (1/deg, (deg-1)/deg). a, b (c,) element indices, image (c, k) image of b.
+    length2 (c,) squared reference length of the pair's longer element (mm^2; None: unknown, the
+    blend angles stay :attr:`Enforcement.c_range`).
     """
 
     nodes: np.ndarray
@@ -409,6 +434,7 @@ class PairStencil:
     a: np.ndarray
     b: np.ndarray
     image: np.ndarray
+    length2: np.ndarray | None = None
 
     def __len__(self):
         return len(self.nodes)
@@ -424,7 +450,8 @@ def node_degree(elements, n_nodes: int) -> np.ndarray:
     return np.bincount(el.ravel(), minlength=n_nodes).astype(np.int64)
 
 
-def pair_stencil(elements, radius, a, b, image=None, periods=None, images=None, degree=None) -> PairStencil:
+def pair_stencil(elements, radius, a, b, image=None, periods=None, images=None, degree=None,
+                 length=None) -> PairStencil:
     """Stencils of candidate pairs (a, b, image) as returned by the broad phase.
 
     Parameters
@@ -434,6 +461,8 @@ def pair_stencil(elements, radius, a, b, image=None, periods=None, images=None, 
     periods : (k, 3) lattice vectors (mm); images : (m, k) element images (element e joins
         node i to node j + images[e] @ periods).
     degree : (n,) elements per node (default: counted from ``elements``).
+    length : (m,) reference element lengths (mm), for the per-pair blend angles
+        (:meth:`Enforcement.pair_c_range`; default None: the global ones).
     """
     el = np.ascontiguousarray(elements, dtype=np.int64)
     if el.ndim != 2 or el.shape[1] != 2:
@@ -460,15 +489,21 @@ def pair_stencil(elements, radius, a, b, image=None, periods=None, images=None, 
         shift[:, 2] = image @ periods
         shift[:, 3] = (image + images[b]) @ periods
     dg = deg[nodes].astype(float)
+    L2 = None
+    if length is not None:
+        L = np.asarray(length, dtype=float)
+        if L.shape != (m,) or not (np.isfinite(L).all() and (L > 0).all()):
+            raise InputError(f"length must have shape ({m},) with positive finite values (mm)")
+        L2 = np.ascontiguousarray(np.maximum(L[a], L[b]) ** 2)
     return PairStencil(nodes=nodes, shift=shift, rsum=np.ascontiguousarray(r[a] + r[b]),
                        alpha=np.ascontiguousarray(1.0 / dg), beta=np.ascontiguousarray((dg - 1.0) / dg),
-                       a=a, b=b, image=image)
+                       a=a, b=b, image=image, length2=L2)
 
 
 def frame_stencil(frame, pairs) -> PairStencil:
     """Stencils of broad-phase ``pairs`` (dict with a, b, image) of a :class:`homtex.Frame`."""
     return pair_stencil(frame.elements, frame.contact_radius, pairs["a"], pairs["b"], pairs.get("image"),
-                        frame.periods, frame.images, node_degree(frame.elements, frame.n_nodes))
+                        frame.periods, frame.images, node_degree(frame.elements, frame.n_nodes), frame.length)
 
 
 @dataclass
@@ -552,7 +587,7 @@ def pair_potential(x, stencil: PairStencil, enforcement: Enforcement, hessian: b
     lam_a = np.zeros(na)
     g = np.zeros((na, 12))
     H = np.zeros((na, 12, 12)) if hessian else np.zeros((0, 12, 12))
-    c0, c1 = enforcement.c_range
+    c0, c1 = enforcement.pair_c_range(stencil)
     if na:
         args = (x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
                 enforcement.code, enforcement.params, enforcement.cutoff, c0, c1, hessian,
