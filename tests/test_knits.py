@@ -213,6 +213,28 @@ def test_the_jersey_pulled_along_the_wales_is_j_shaped_and_contracts(wale):
         assert ds[v].attrs["units"] and ds[v].attrs["long_name"]
 
 
+def test_localising_snaps_less_finely_and_stepping_from_memory_leave_the_curve_unchanged(jersey, wale,
+                                                                                          monkeypatch):
+    """The knit tests stop bisecting a snap after 5 halvings (a jump no step size resolves) and
+    start a step at the last size that passed (EngineStepper's max_refine and memory): the
+    equilibria at the reported levels are those of the full bisection (max_refine = max_cuts = 10,
+    every level tried whole first), whose extra tries were all rolled back."""
+    from homtex.contact import engine
+
+    init = engine.EngineStepper.__init__
+
+    def full_bisection(self, *a, **k):
+        k.pop("max_refine", None)
+        k.pop("memory", None)
+        init(self, *a, **k)
+
+    monkeypatch.setattr(engine.EngineStepper, "__init__", full_bisection)
+    ref = homtex.tensile(jersey, strain=0.2, direction="wale", steps=2)
+    assert ref.attrs["status"] == "ok"
+    for k in ("force", "width"):
+        assert wale[k].values == pytest.approx(ref[k].values, rel=1e-6)
+
+
 def test_filaments_beyond_the_failure_stress_are_flagged(wale):
     s, flag = wale.max_filament_stress.values, wale.beyond_failure_stress.values
     assert np.array_equal(flag, s > 3.0) and flag.any() and not flag.all()

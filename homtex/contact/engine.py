@@ -59,6 +59,12 @@ class EngineStepper:
     refine : a step whose imbalance or stabilisation exceeds this share of its work is halved.
     on_accept : called with the StepInfo of every accepted sub-step; whatever it returns is kept in
         ``accepted`` (rolled back with the sub-steps a refinement replaces).
+    max_refine : halvings, at most, for accuracy (``refine``; default ``max_cuts``): past it a step
+        that still releases energy is kept (a snap: a jump of the path that no step size resolves,
+        whose energy goes to the ledger's stabilisation); failures are still halved to ``max_cuts``.
+    memory : start a step at the sub-step size that last passed, doubled (not at the whole step):
+        on a path whose hard stretch spans several levels, each level's doomed coarse tries (solved
+        to equilibrium, then rolled back) are skipped. The levels are on the same halving grid.
 
     A step that stalls on buckling beams, or converges to a state with a negative eigenvalue (a
     perfect structure past its bifurcation), is left along the critical mode by half the
@@ -67,9 +73,13 @@ class EngineStepper:
     """
 
     def __init__(self, sol: IncrementalSolver, solve: Callable[[float], StepInfo], *, max_cuts: int = 4,
-                 refine: float = 0.01, on_accept: Callable[[StepInfo], object] | None = None, start: float = 0.0):
+                 refine: float = 0.01, on_accept: Callable[[StepInfo], object] | None = None, start: float = 0.0,
+                 max_refine: int | None = None, memory: bool = False):
         self.sol, self._solve = sol, solve
         self.max_cuts, self.refine = int(max_cuts), float(refine)
+        self.max_refine = self.max_cuts if max_refine is None else min(int(max_refine), self.max_cuts)
+        self.memory = bool(memory)
+        self.hint = 0                    # depth the next try starts at (memory)
         self.on_accept = on_accept
         self.level = float(start)
         self.accepted: list = []
@@ -79,6 +89,8 @@ class EngineStepper:
 
     def advance(self, level: float, depth: int = 0) -> StepInfo:
         """Reach ``level`` from the current one (SolverError when a step fails at every depth)."""
+        if self.memory and depth < min(self.hint, self.max_cuts):
+            return self._halves(level, depth)
         L = self.sol.ledger
         before = {k: L[k] for k in _LEDGER}
         cp = self.sol.checkpoint()
@@ -95,7 +107,7 @@ class EngineStepper:
         if info.negative_eigenvalues > 0:
             info = self._restabilize(level, info)
         self._accepted(info)
-        if depth < self.max_cuts and self._too_coarse({k: L[k] - before[k] for k in _LEDGER}):
+        if depth < self.max_refine and self._too_coarse({k: L[k] - before[k] for k in _LEDGER}):
             done, coarse, totals1 = self.sol.checkpoint(), self.accepted[n0:], dict(self.totals)
             self.sol.rollback(cp)
             del self.accepted[n0:]
@@ -107,6 +119,7 @@ class EngineStepper:
                 self.accepted[n0:] = coarse
                 self.totals = totals1
         self.level = level
+        self.hint = max(depth - 1, 0)
         return info
 
     def _leave_along_mode(self, level: float) -> StepInfo | None:

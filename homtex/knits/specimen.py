@@ -147,7 +147,8 @@ def specimen_test(relaxed, info, wales, courses, strain, v, steps, mu, progress,
                             initial=rel.export_state())
     sol.delta = sol.s.delta0
     sol._start_ledger()
-    stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam), max_cuts=10, refine=0.003)
+    stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam), max_cuts=10, refine=0.003,
+                            max_refine=5, memory=True)
     rec = _Recorder(sol, {**info, "course": np.zeros(spec.n_elements, int), "filament": np.zeros(spec.n_elements, int)},
                     info["yarn_model"].get("failure_stress"))
     mid = np.flatnonzero(np.abs(spec.nodes[:, 1] - 0.5 * (spec.nodes[top, 1].mean() + spec.nodes[bottom, 1].mean()))
