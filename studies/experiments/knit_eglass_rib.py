@@ -111,10 +111,11 @@ def main(argv=None):
         k = int(np.argmin(np.abs(ds.strain.values - s)))
         P = ds.periods.values[k]
         f = state_frame(frame, ds.x.values[k], P)
-        pics.append(knit_picture(f, out / f"knit_eglass_rib_cell_{int(round(100 * s))}.png", tiles=(3, 2),
-                                 title=f"E-glass 1x1 rib at {100 * float(ds.strain[k]):.0f} % along the wales"))
+        pct = int(round(100 * float(ds.strain[k])))          # the level shown, in names and title alike
+        pics.append(knit_picture(f, out / f"knit_eglass_rib_cell_{pct}.png", tiles=(3, 2),
+                                 title=f"E-glass 1x1 rib at {pct} % along the wales"))
         write_state_vtk(frame, ds.x.values[k], P, ds.element_energy.values[k],
-                        out / "vtk" / f"knit_eglass_rib_{int(round(100 * s))}.vtu")
+                        out / "vtk" / f"knit_eglass_rib_{pct}.vtu")
     charts += pics
     publish(args, *charts)
     return runs
