@@ -9,7 +9,8 @@ import homtex
 from homtex.contact.broad import BroadPhase
 from homtex.contact.ccd import displacement_cap, pair_step_bound, plate_step_bound, step_candidates
 from homtex.contact.plates import plate_gaps
-from homtex.contact.potential import frame_stencil, pair_gaps, pair_stencil
+from homtex.contact.potential import pair_gaps
+from homtex.contact.stencil import frame_stencil, pair_stencil
 from homtex.errors import InputError
 from homtex.model.exclusions import arc_exclusions
 

@@ -15,7 +15,8 @@ from homtex.contact.friction import (
     plate_friction_lag,
 )
 from homtex.contact.plates import plate_potential
-from homtex.contact.potential import Enforcement, pair_stencil
+from homtex.contact.potential import Enforcement
+from homtex.contact.stencil import pair_stencil
 from homtex.errors import InputError
 
 ipctk = pytest.importorskip("ipctk")

@@ -15,7 +15,8 @@ from homtex.contact.distance import (
     sin2_angle,
 )
 from homtex.contact.plates import plate_potential
-from homtex.contact.potential import Enforcement, assemble_blocks, frame_stencil, pair_potential, pair_stencil
+from homtex.contact.potential import Enforcement, assemble_blocks, pair_potential
+from homtex.contact.stencil import frame_stencil, pair_stencil
 from homtex.errors import InputError
 from homtex.model.exclusions import arc_exclusions
 

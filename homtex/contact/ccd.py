@@ -36,7 +36,8 @@ from numba import njit, prange
 from ..errors import InputError
 from .distance import _ee_d2
 from .plates import _plate_args, _plates
-from .potential import PairStencil, _chunks, _load_stencil, _parallel, _positions
+from .potential import _chunks, _load_stencil, _parallel, _positions
+from .stencil import PairStencil
 
 log = logging.getLogger(__name__)
 

@@ -43,7 +43,6 @@ from .distance import _d2_at, _ee_classify, _sin2_angle
 from .plates import _plate_args, _plates
 from .potential import (
     Enforcement,
-    PairStencil,
     _blend,
     _chunks,
     _load_stencil,
@@ -55,6 +54,7 @@ from .potential import (
     _term_weights,
     pair_gaps,
 )
+from .stencil import PairStencil
 
 log = logging.getLogger(__name__)
 

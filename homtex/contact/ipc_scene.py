@@ -36,7 +36,8 @@ from .broad import BroadPhase
 from .constraints import pair_keys
 from .friction import FrictionLag, pair_friction_lag, plate_friction_lag
 from .options import Contact
-from .potential import Enforcement, frame_stencil, pair_potential
+from .potential import Enforcement, pair_potential
+from .stencil import frame_stencil
 
 log = logging.getLogger(__name__)
 

@@ -41,7 +41,8 @@ from homtex.contact import potential as pot
 from homtex.contact.broad import BroadPhase
 from homtex.contact.ccd import pair_step_bound
 from homtex.contact.friction import friction_potential, pair_friction_lag
-from homtex.contact.potential import Enforcement, frame_stencil, pair_gaps, pair_potential
+from homtex.contact.potential import Enforcement, pair_gaps, pair_potential
+from homtex.contact.stencil import frame_stencil
 from homtex.model.exclusions import arc_exclusions
 
 R, GHAT, SPACING, EL_LEN = 0.1, 0.01, 0.5, 0.3

@@ -72,7 +72,8 @@ import scipy.sparse.linalg as spla
 from homtex.contact.ccd import displacement_cap, pair_step_bound, plate_step_bound
 from homtex.contact.friction import friction_potential, plate_friction_lag
 from homtex.contact.plates import plate_gaps, plate_potential
-from homtex.contact.potential import Enforcement, assemble_blocks, pair_gaps, pair_potential, pair_stencil
+from homtex.contact.potential import Enforcement, assemble_blocks, pair_gaps, pair_potential
+from homtex.contact.stencil import pair_stencil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import parser, setup  # noqa: E402
