@@ -273,6 +273,7 @@ def continue_to(eq: Equilibrium, rec, target: float, ds: float, *, mode: np.ndar
                 rec.event("limit", limit_on_step(snap[2], eq.lam, ds, arc.slope0, arc.slope1), arc.negative)
         predictor = None
         taken += 1
+        cuts = 0                    # max_cuts bounds the halvings in a row, not over the whole path
         stable = arc.negative == 0
         crossed = snap[2] < target <= eq.lam and (turns > 0 or not after_turn)
         if crossed and stable and land(eq, rec, snap, target):
