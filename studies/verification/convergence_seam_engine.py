@@ -4,7 +4,8 @@ seam on the large-motion engine, and its sensitivity to friction and to the cali
 With the cell file's calibrated stitch (``[parameters.seam] prestrain``) the seam cells of
 d = 18 / 24 / 43 mm are sewn (:func:`homtex.seams.sew.sew`)
 
-* ``steps``: with twice the shipped ramp's levels (20; the shipped 10 are the mesh part's first case);
+* ``steps``: with twice the shipped ramp's levels (the cell file's ``ramp_steps``; the shipped ramp
+  is the mesh part's first case);
 * ``mesh``: at the shipped resolution (2 elements per segment, 8 pile segments) and two finer ones
   (12 and 16 pile segments: the pile legs buckle, the layers barely bend; the seam thread twice
   as fine in the finest);
@@ -71,7 +72,7 @@ def run_part(part, cell, quick):
     import homtex
 
     D = [8.5] if quick else [18.0, 24.0, 43.0]
-    n = 1 if quick else 10
+    n = 1 if quick else int(cell.parameters["seam"].get("ramp_steps", 10))
     eps = 0.15 if quick else None         # quick: one small sewing per part at a small pre-strain
     rows = []
     if part == "steps":
@@ -124,7 +125,8 @@ def chart(out):
         if p == "steps" and "mesh" in parts:      # the shipped ramp: the mesh part's shipped resolution
             m = parts["mesh"]
             base = m.isel(case=[i for i, lab in enumerate(m.label.values) if str(lab).startswith("8 pile")])
-            base = base.assign(label=("case", np.array(["10 levels"] * base.sizes["case"])))
+            n = int(str(ds.label.values[0]).split()[0]) // 2       # the steps part ran twice the shipped ramp
+            base = base.assign(label=("case", np.array([f"{n} levels"] * base.sizes["case"])))
             ds = xr.concat([base, ds], dim="case")
             ds = ds.isel(case=np.argsort(ds.seam_distance.values, kind="stable"))
         if p in ("steps", "mesh"):
