@@ -222,8 +222,16 @@ def _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options, 
 
 
 
+def _input_flag(what: str, curve) -> str:
+    """'' unless the input ``curve`` (a Dataset) carries status "flagged": then what its flag says."""
+    attrs = getattr(curve, "attrs", {})
+    if attrs.get("status") != "flagged":
+        return ""
+    return f"the {what} is flagged: {attrs.get('status_detail', '')}"
+
+
 def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0, cushion, height_scatter, seed, a):
-    """(force (steps,) N, failure detail or '', seconds spent on the curve): the "cushion" law of
+    """(force (steps,) N, failure detail or '', seconds spent on the curve, the curve): the "cushion" law of
     :func:`macro_curve`, every column on the cushion's own curve shifted by its cushion's height
     difference (NaN past the curve's end)."""
     t0 = time.perf_counter()
@@ -233,7 +241,8 @@ def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0,
         if cell is None:
             raise InputError("macro_curve(law='cushion'): give a cell or a cushion_curve")
         # pressed as far as the tallest cushion goes, in the default law's 2 % plate steps (the sewn
-        # d = 24 mm cell is followed to 64 %, docs/seams.md; a press that fails is not kept on disk)
+        # press can stop where the punch meets a cascade of buckling legs, docs/seams.md; a press that
+        # fails is not kept on disk)
         dstep = LAW_STRAIN / LAW_STEPS
         n = max(1, math.ceil(min(need, 0.98) / dstep - 1e-9))
         cushion_curve = cushion_law(cell, seam_distance=float(seam_distance), strain=n * dstep, steps=n)
@@ -246,7 +255,7 @@ def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0,
         fail = f"the cushion's curve ends at strain {c_max:.4g} < {need:.4g} (its status: {why}); curve truncated"
     e_col = np.clip(eps[:, None] + shift[None, :], 0.0, None)
     sig = np.where(e_col <= c_max + 1e-12, claw(np.minimum(e_col, c_max)), np.nan)
-    return sig.sum(axis=1) * a * 1e-3, fail, t_curve
+    return sig.sum(axis=1) * a * 1e-3, fail, t_curve, cushion_curve
 
 def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, plate_area: float = 12100.0,
                 strain: float = 0.5, seed=None, curve=None, profile=None, n_columns: int = 440,
@@ -365,10 +374,17 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         total = total - held
     force = total * a * 1e-3  # kPa mm^2 -> N
     if mode == "cushion":
-        force, fail, t_c = _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0, cushion,
-                                          height_scatter, seed, a)
+        force, fail, t_c, cushion_curve = _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end,
+                                                         H0, cushion, height_scatter, seed, a)
         t_sub += t_c
         status, detail = (Status.FAILED, fail) if fail else (status, detail)
+    if status is Status.OK:
+        # a flag on an input law (a ledger check that failed on the yarn-level path) is the answer's too
+        flags = [f for f in (_input_flag("unseamed compression curve", curve) if mode == "columns" else "",
+                             _input_flag("cushion's yarn-level curve", cushion_curve) if mode == "cushion" else "")
+                 if f]
+        if flags:
+            status, detail = Status.FLAGGED, "; ".join(flags)
     frac = k / n_columns
     seconds = time.perf_counter() - t0 - t_sub
     per = {k: float(h[cushion == k].max()) for k in np.unique(cushion)}

@@ -293,3 +293,23 @@ def test_cushion_law_is_the_cushion_curve_shifted_by_each_cushions_height(monkey
     np.testing.assert_allclose(computed.stress.values, sc.stress.values, atol=1e-12)
     with pytest.raises(InputError, match="needs seam_distance"):
         macro_curve(curve=linear, thickness=H0, law="cushion")
+
+
+def test_a_flag_on_the_law_a_curve_comes_from_is_the_curves_flag():
+    """A yarn-level curve whose energy ledger failed its check (status "flagged") gives the macro
+    curve built on it the same flag and its reason; the numbers are unchanged."""
+    import xarray as xr
+
+    e = np.linspace(0.0, 0.8, 81)
+    why = "the stabilisation absorbed 16.8 % of the driven work by strain 0.28"
+    clean = xr.Dataset({"stress": ("strain", 50.0 * e)}, coords={"strain": e}, attrs={"status": "ok"})
+    flagged = clean.assign_attrs(status="flagged", status_detail=why)
+    kw = dict(thickness=H0, seam_distance=24.0, profile=bump(), slack_travel=0.1, steps=51, strain=0.5)
+    ok = macro_curve(curve=linear, law="cushion", cushion_curve=clean, **kw)
+    fl = macro_curve(curve=linear, law="cushion", cushion_curve=flagged, **kw)
+    assert ok.attrs["status"] == "ok" and fl.attrs["status"] == "flagged"
+    assert "cushion's yarn-level curve is flagged" in fl.attrs["status_detail"] and why in fl.attrs["status_detail"]
+    np.testing.assert_array_equal(ok.force.values, fl.force.values)
+    col = macro_curve(curve=flagged, **kw)                  # the column model on a flagged unseamed law
+    assert col.attrs["status"] == "flagged" and "unseamed compression curve is flagged" in col.attrs["status_detail"]
+    assert macro_curve(curve=clean, **kw).attrs["status"] == "ok"
