@@ -222,12 +222,19 @@ def _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options, 
 
 
 
-def _input_flag(what: str, curve) -> str:
-    """'' unless the input ``curve`` (a Dataset) carries status "flagged": then what its flag says."""
-    attrs = getattr(curve, "attrs", {})
-    if attrs.get("status") != "flagged":
-        return ""
-    return f"the {what} is flagged: {attrs.get('status_detail', '')}"
+def _final_status(status: Status, detail: str, fail: str, mode: str, curve, cushion_curve) -> tuple[Status, str]:
+    """(status, detail) of a macro curve: failed where the cushion's curve ended short (``fail``),
+    else flagged where the law it was built on (the unseamed curve for "columns", the cushion's
+    curve for "cushion": Datasets, or functions without a status) is flagged (a ledger check that
+    failed on the yarn-level path)."""
+    if fail:
+        return Status.FAILED, fail
+    what, law = (("unseamed compression curve", curve) if mode == "columns" else
+                 ("cushion's yarn-level curve", cushion_curve))
+    attrs = getattr(law, "attrs", {})
+    if status is not Status.OK or attrs.get("status") != "flagged":
+        return status, detail
+    return Status.FLAGGED, f"the {what} is flagged: {attrs.get('status_detail', '')}"
 
 
 def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0, cushion, height_scatter, seed, a):
@@ -273,8 +280,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         and H0 (``info["thickness"]``).
     seam_distance : d, mm (None: no seams, all columns H0).
     height_scatter : standard deviation of the cushion-to-cushion height, mm (seeded by ``seed``).
-    plate_area : punch area, mm^2 (121 cm^2 = 12100 mm^2, DIN EN ISO 3386-1).
-    strain : final plate displacement / H0.
+    plate_area : punch area, mm^2 (121 cm^2, DIN EN ISO 3386-1); strain : final plate travel / H0.
     curve : unseamed law: Dataset (``stress`` kPa over ``strain``), Lookup over "strain" or a
         vectorised callable stress_kPa(strain).
     profile : seam profile: Dataset (``height`` mm over ``x`` mm, scalar ``cushion_height``)
@@ -296,7 +302,8 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     -------
     xarray.Dataset over ``plate_displacement`` (steps,) mm with ``force`` (N), ``stress`` (kPa),
     ``strain`` (1), ``engaged_fraction`` (1); ``column_height`` (n_columns,) mm over
-    ``column_x``; attrs: H0, cushion heights, model settings, ``seconds``.
+    ``column_x``; attrs: H0, cushion heights, model settings, ``seconds``, status ("failed": a law
+    ends short of the travel; "flagged": the law it is built on is flagged).
     """
     t0 = time.perf_counter()
     check_choice(pre_stress, "pre_stress", PRE_STRESS)
@@ -325,7 +332,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                                          profile_options)
     H0 = _thickness(cell, curve, thickness)
     law, eps_max = unseamed_law(curve)
-    status, detail = Status.OK, ""
+    status, detail, fail = Status.OK, "", ""
     eps_end = float(strain)
     if eps_max < strain - 1e-12:
         eps_end = eps_max
@@ -377,14 +384,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         force, fail, t_c, cushion_curve = _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end,
                                                          H0, cushion, height_scatter, seed, a)
         t_sub += t_c
-        status, detail = (Status.FAILED, fail) if fail else (status, detail)
-    if status is Status.OK:
-        # a flag on an input law (a ledger check that failed on the yarn-level path) is the answer's too
-        flags = [f for f in (_input_flag("unseamed compression curve", curve) if mode == "columns" else "",
-                             _input_flag("cushion's yarn-level curve", cushion_curve) if mode == "cushion" else "")
-                 if f]
-        if flags:
-            status, detail = Status.FLAGGED, "; ".join(flags)
+    status, detail = _final_status(status, detail, fail, mode, curve, cushion_curve)
     frac = k / n_columns
     seconds = time.perf_counter() - t0 - t_sub
     per = {k: float(h[cushion == k].max()) for k in np.unique(cushion)}
