@@ -222,6 +222,13 @@ def _cell_inputs(cell, curve, profile, seam_distance, strain, compress_options, 
 
 
 
+def _input_status(curve) -> tuple[str, str]:
+    """(status, what it says) of an input law: a Dataset's status attrs; ("", "unknown") for a
+    function or a Dataset without them."""
+    attrs = getattr(curve, "attrs", {})
+    return attrs.get("status", ""), attrs.get("status_detail", attrs.get("status", "unknown"))
+
+
 def _final_status(status: Status, detail: str, fail: str, mode: str, curve, cushion_curve) -> tuple[Status, str]:
     """(status, detail) of a macro curve: failed where the cushion's curve ended short (``fail``),
     else flagged where the law it was built on (the unseamed curve for "columns", the cushion's
@@ -231,10 +238,10 @@ def _final_status(status: Status, detail: str, fail: str, mode: str, curve, cush
         return Status.FAILED, fail
     what, law = (("unseamed compression curve", curve) if mode == "columns" else
                  ("cushion's yarn-level curve", cushion_curve))
-    attrs = getattr(law, "attrs", {})
-    if status is not Status.OK or attrs.get("status") != "flagged":
+    law_status, why = _input_status(law)
+    if status is not Status.OK or law_status != "flagged":
         return status, detail
-    return Status.FLAGGED, f"the {what} is flagged: {attrs.get('status_detail', '')}"
+    return Status.FLAGGED, f"the {what} is flagged: {why}"
 
 
 def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0, cushion, height_scatter, seed, a):
@@ -257,8 +264,7 @@ def _cushion_force(cell, cushion_curve, seam_distance, strain, eps, eps_end, H0,
     claw, c_max = unseamed_law(cushion_curve)
     fail = ""
     if c_max < need - 1e-12:
-        attrs = getattr(cushion_curve, "attrs", {})
-        why = attrs.get("status_detail", attrs.get("status", "unknown"))
+        why = _input_status(cushion_curve)[1]
         fail = f"the cushion's curve ends at strain {c_max:.4g} < {need:.4g} (its status: {why}); curve truncated"
     e_col = np.clip(eps[:, None] + shift[None, :], 0.0, None)
     sig = np.where(e_col <= c_max + 1e-12, claw(np.minimum(e_col, c_max)), np.nan)
@@ -336,8 +342,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
     eps_end = float(strain)
     if eps_max < strain - 1e-12:
         eps_end = eps_max
-        attrs = getattr(curve, "attrs", {})
-        why = attrs.get("status_detail", attrs.get("status", "unknown"))
+        why = _input_status(curve)[1]
         status, detail = Status.FAILED, (f"the unseamed compression curve ends at strain {eps_max:.4g} < "
                                          f"{strain:.4g} (its status: {why}); curve truncated")
     x, h, cushion = column_heights(H0, seam_distance=seam_distance, profile=profile, height_scatter=height_scatter,

@@ -62,7 +62,8 @@ def one(cell, d, *, label, group, steps, prestrain=None, contact=None, seam_kw=N
                      "cushion_height": float(p.cushion_height.values[k]) if ok else np.nan,
                      "seam_height": float(p.seam_height.values[k]) if ok else np.nan,
                      "energy_balance": float(p.energy_balance.values[k]) if ok else np.nan,
-                     "status": s.status, "wall_seconds": wall, "cpu_seconds": cpu, "n_nodes": s.frame.n_nodes})
+                     "status": s.status, "wall_seconds": wall, "cpu_seconds": cpu, "n_nodes": s.frame.n_nodes,
+                     "ramp_levels": steps})
         log.info("%s d = %g: cushion %.3f mm, seam line %.3f mm, %s, %.0f s", rows[-1]["label"], d,
                  rows[-1]["cushion_height"], rows[-1]["seam_height"], s.status, wall)
     return rows
@@ -102,7 +103,8 @@ def to_dataset(rows, part):
     keys = [k for k in rows[0] if k not in ("label", "group", "status")]
     data = {k: (("case",), np.array([r[k] for r in rows], dtype=float)) for k in keys}
     units = {"seam_distance": "mm", "effective_seam_distance": "mm", "prestrain": "1", "cushion_height": "mm",
-             "seam_height": "mm", "energy_balance": "1", "wall_seconds": "s", "cpu_seconds": "s", "n_nodes": "1"}
+             "seam_height": "mm", "energy_balance": "1", "wall_seconds": "s", "cpu_seconds": "s", "n_nodes": "1",
+             "ramp_levels": "1"}
     ds = xr.Dataset({k: (dims, v, {"units": units[k], "long_name": k.replace("_", " ")}) for k, (dims, v) in
                      data.items()})
     for k in ("label", "group", "status"):
@@ -125,7 +127,7 @@ def chart(out):
         if p == "steps" and "mesh" in parts:      # the shipped ramp: the mesh part's shipped resolution
             m = parts["mesh"]
             base = m.isel(case=[i for i, lab in enumerate(m.label.values) if str(lab).startswith("8 pile")])
-            n = int(str(ds.label.values[0]).split()[0]) // 2       # the steps part ran twice the shipped ramp
+            n = int(base.ramp_levels.values[0]) if "ramp_levels" in base else 10   # (older files: 10)
             base = base.assign(label=("case", np.array([f"{n} levels"] * base.sizes["case"])))
             ds = xr.concat([base, ds], dim="case")
             ds = ds.isel(case=np.argsort(ds.seam_distance.values, kind="stable"))
