@@ -14,8 +14,8 @@ disk cache off (the memory cache stays for the process). Clear it with :func:`cl
 (``homtex.clear_cache()``) or ``homtex cache --clear``; ``homtex cache`` lists what it holds.
 
 A file that cannot be read (truncated by a full disk, written by another version of netCDF) is
-recomputed and replaced; a result whose status is not "ok" is kept in memory only (a failure
-is not persisted).
+recomputed and replaced; a failed result is kept in memory only (a failure is not persisted); a
+flagged one is stored with its flag (its ``status`` and ``status_detail`` travel with it).
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ def _path(kind: str, key: str) -> Path:
 
 def cached(kind: str, cell, params: dict, compute):
     """The Dataset of ``compute()`` for (kind, cell, params): from memory, else from the disk cache,
-    else computed and stored (the disk copy only when its status is "ok"). The caller gets its own
+    else computed and stored (on disk unless its status is "failed"). The caller gets its own
     copy (changing it does not change the cache)."""
     key = cache_key(kind, cell, params)
     hit = _MEMORY.get(key)
@@ -105,7 +105,7 @@ def cached(kind: str, cell, params: dict, compute):
     ds.attrs["cache_key"] = key
     ds.attrs["cache_kind"] = kind
     _MEMORY[key] = ds
-    if _disk_enabled() and ds.attrs.get("status", "ok") == "ok":
+    if _disk_enabled() and ds.attrs.get("status", "ok") != "failed":
         try:
             write_netcdf(ds, path)
         except OSError as exc:

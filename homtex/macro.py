@@ -94,13 +94,16 @@ def engine_law(cell, *, strain: float = LAW_STRAIN, steps: int = LAW_STEPS, cont
 
 
 def cushion_law(cell, *, seam_distance: float, strain: float = LAW_STRAIN, steps: int = LAW_STEPS,
-                cache: bool = True):
+                cache: bool = True, prestrain: float | None = None):
     """The seamed cushion's own compression law: the sewn seam cell of ``cell`` under the punch on
     the large-motion engine (``seam_compression(cell, seam_distance=d, strain=strain, steps=steps)``:
     ``stress`` kPa over ``strain`` = plate travel / unseamed thickness), kept in the result cache
     (the sewn state too): the first call sews and presses (minutes), a repeated one costs
-    milliseconds. A failed press is returned (with its status) and not stored on disk."""
+    milliseconds. A failed press is returned (with its status) and not stored on disk.
+    ``prestrain``: another length-controlled stitch than the calibrated one (None)."""
     kw = {"seam_distance": float(seam_distance), "strain": float(strain), "steps": int(steps)}
+    if prestrain is not None:
+        kw["prestrain"] = float(prestrain)
     if not cache:
         return seam_compression(cell, cache=False, **kw)
     return cached("cushion_law", cell, kw, lambda: seam_compression(cell, **kw))

@@ -148,6 +148,21 @@ def seamed_ds():
     return _meta(ds)
 
 
+def strip_ds():
+    """Like the strip check's file (homtex.seams.strip.strip_check)."""
+    e = np.linspace(0.02, 0.5, 25)
+    ramp = np.maximum(e - 0.25, 0.0)
+    data = {f"stress_{k}": ("strain", f * 40 * ramp, {"units": "kPa", "long_name": k})
+            for k, f in (("strip", 1.0), ("cushion_laws", 1.04), ("shifted_law", 1.01), ("columns", 0.8))}
+    data.update({"cushion_height_strip": ("cushion", [14.9, 15.5], {"units": "mm", "long_name": "strip"}),
+                 "cushion_height_single": ("cushion", [14.6, 15.3], {"units": "mm", "long_name": "single"}),
+                 "prestrain": ("cushion", [0.64, 0.52], {"units": "1", "long_name": "eps0"})})
+    ds = xr.Dataset(data, coords={"strain": ("strain", e, {"units": "1"}), "cushion": [0, 1]},
+                    attrs={"seams": 2, "seam_distance_mm": 25.4, "error_cushion_laws": 0.04, "error_shifted_law": 0.01,
+                           "error_columns": 0.2, "thickness_mm": 20.0})
+    return _meta(ds)
+
+
 def knit_tensile_ds():
     """Like the knit rib study's file (homtex.tensile over strain, friction as a dimension)."""
     e = np.linspace(0, 0.45, 10)
@@ -163,7 +178,8 @@ def knit_tensile_ds():
 
 ALL = {"compression": compression_ds, "seam_profile": yarn_profile_ds, "macro_curves": macro_ds,
        "macro_curve": lambda: macro_ds(False), "study": lambda: study_ds("samples"), "cushions": cushions_ds,
-       "seamed_vs_macro": seamed_ds, "speed_accuracy": speed_ds, "knit_tensile": knit_tensile_ds}
+       "seamed_vs_macro": seamed_ds, "speed_accuracy": speed_ds, "knit_tensile": knit_tensile_ds,
+       "strip_vs_macro": strip_ds}
 
 
 def _texts(fig):

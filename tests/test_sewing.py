@@ -118,7 +118,8 @@ def test_a_sewn_state_survives_the_disk_cache(sewn, cell, tmp_path):
 def test_result_cache_memory_disk_and_keys(tmp_path, monkeypatch, cell):
     """A result is computed once per (kind, cell content, parameters, version): again from memory,
     then from disk after the memory is cleared; another cell or parameter is a new computation;
-    a failed result is not written to disk; clear_cache empties the folder."""
+    a failed result is not written to disk, a flagged one is (with its flag); clear_cache empties the
+    folder."""
     import xarray as xr
 
     monkeypatch.setenv("HOMTEX_CACHE_DIR", str(tmp_path / "c"))
@@ -145,7 +146,12 @@ def test_result_cache_memory_disk_and_keys(tmp_path, monkeypatch, cell):
     assert calls == [1.0, 2.0, 3.0]
     cache.cached("law", cell, {"p": 4.0}, compute(4.0, status="failed"))
     assert len(cache.list_cache()) == 3                   # the failed one stays in memory only
-    assert cache.clear_cache() == 3 and cache.list_cache() == []
+    # a flagged result is kept on disk with its flag (it is the answer, and says what to doubt)
+    cache.cached("law", cell, {"p": 5.0}, compute(5.0, status="flagged"))
+    cache.clear_cache(disk=False)
+    back = cache.cached("law", cell, {"p": 5.0}, compute(55.0))
+    assert calls == [1.0, 2.0, 3.0, 4.0, 5.0] and back.attrs["status"] == "flagged"
+    assert cache.clear_cache() == 4 and cache.list_cache() == []
 
 
 def test_seam_profile_defaults_to_the_engine_and_is_cached(tmp_path, monkeypatch, cell, sewn):

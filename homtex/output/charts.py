@@ -24,7 +24,7 @@ import numpy as np
 
 __all__ = ["LOAD_CELL_N", "PAPER_CUSHIONS_MM", "PLATE_AREA_MM2", "VALIDITY_STRAIN", "axis_units", "cell_label",
            "compression_chart", "cushions_chart", "macro_chart", "pyplot", "save", "seam_distance",
-           "seam_profile_chart", "seamed_chart", "speed_accuracy_chart"]
+           "seam_profile_chart", "seamed_chart", "speed_accuracy_chart", "strip_chart"]
 
 #: the source paper's seamed specimens: seam distance, mm -> (measured cushion height low, high, paper's
 #: simulated height), mm (Table 1; d = 18 mm: 8 mm in the table, 12 mm on average in the text)
@@ -350,8 +350,9 @@ ERROR_DEFINITION = "max |stress - reference| / max |reference| over the range"
 
 
 def seamed_chart(ds):
-    """Yarn-level seam cell against the macro layer on the same specimen (``seamed_yarn_vs_macro.nc``):
-    stress over punch travel with the error defined on the chart; contacts (counts) beside it."""
+    """The seamed specimen at yarn level against the macro layer (``seamed_yarn_vs_macro.nc``):
+    stress over punch travel, the unseamed fabric beside it and the error of each macro curve
+    defined on the chart; the cushion meeting the punch (contact counts) beside it."""
     plt = pyplot()
     cell = cell_label(ds)
     d = float(ds.attrs.get("seam_distance_mm", np.nan))
@@ -360,34 +361,36 @@ def seamed_chart(ds):
     H0 = _thickness(ds)
     kpa = _units(ds, "stress_yarn", "kPa")
     _tag(ax[0], kpa, "compressive stress", ax[0].plot(w, ds.stress_yarn.values, "o-", ms=3, color="tab:blue",
-                                                      label=ds.stress_yarn.attrs.get("long_name", "yarn-level "
-                                                                                     "seam cell") + " (reference)"))
-    fine = "travel" in ds.dims
-    for name, ls, lab in (("stress_macro", "-", "macro layer, pre-load handed over by the thread"),
-                          ("stress_macro_held", "--", "macro, pre-load held"),
-                          ("stress_macro_released", "-.", "macro, pre-load released at contact"),
-                          ("stress_unseamed", ":", "unseamed (yarn level)")):
-        key = f"{name}_curve" if fine and f"{name}_curve" in ds else name
+                                                      label=ds.stress_yarn.attrs.get("long_name", "yarn level")
+                                                      + " (reference)"))
+    styles = {"stress_unseamed": (":", "0.4"), "stress_macro": ("-", "tab:orange"),
+              "stress_macro_foundation": ("--", "tab:green"), "stress_macro_held": ("--", "tab:purple"),
+              "stress_macro_released": ("-.", "tab:brown")}
+    for name, (ls, color) in styles.items():
+        key = f"{name}_curve" if f"{name}_curve" in ds else name
         if key not in ds:
             continue
         xx = ds.travel.values if "travel" in ds[key].dims else w
-        if name == "stress_unseamed":       # the Dataset says which model
-            lab = ds[key].attrs.get("long_name", lab)
-        _tag(ax[0], kpa, None, ax[0].plot(xx, ds[key].values, ls, lw=1.4 if ls == "-" else 0.9, label=lab,
-                                          color="0.4" if name == "stress_unseamed" else None))
+        _tag(ax[0], kpa, None, ax[0].plot(xx, ds[key].values, ls, lw=1.4 if ls == "-" else 1.0, color=color,
+                                          label=ds[key].attrs.get("long_name", name)))
     hit = float(ds.attrs.get("stitch_meets_punch_mm", np.inf))
     if np.isfinite(hit):
         ax[0].axvline(hit, color="tab:red", lw=0.8, ls=":", label=f"punch meets the stitch ({hit:.2f} mm)")
-    err = ds.attrs.get("max_relative_error")
-    if err is not None:
-        w_err = float(ds.attrs.get("error_range_mm", VALIDITY_STRAIN * H0))
-        ax[0].text(0.98, 0.03, f"error = {ERROR_DEFINITION}\n(0 - {w_err:g} mm = {100 * w_err / H0:.0f} %): "
-                   f"macro {100 * float(err):.1f} %,\npre-load held "
-                   f"{100 * float(ds.attrs['max_relative_error_held']):.1f} %, released "
-                   f"{100 * float(ds.attrs['max_relative_error_released']):.1f} %",
-                   transform=ax[0].transAxes, fontsize=7, va="bottom", ha="right",
-                   bbox=dict(boxstyle="round", fc="w", ec="0.7"))
+    w_err = float(ds.attrs.get("error_range_mm", VALIDITY_STRAIN * H0))
+    lines = [f"error = {ERROR_DEFINITION}"]
+    for key, what in (("macro", "macro, engine cushion"), ("macro_foundation", "macro, foundation cushion")):
+        e1 = ds.attrs.get(f"max_relative_error_{key}_to_error_strain")
+        e2 = ds.attrs.get(f"max_relative_error_{key}_to_end")
+        if e1 is not None:
+            lines.append(f"{what}: {100 * float(e1):.1f} % to {100 * w_err / H0:.0f} %, {100 * float(e2):.1f} % to "
+                         f"{100 * float(ds.attrs.get('end_strain', 0.7)):.0f} %")
+    if "max_relative_error" in ds.attrs:        # files of the linear seam cell (before the engine)
+        lines.append(f"macro {100 * float(ds.attrs['max_relative_error']):.1f} % (0 - {w_err:g} mm)")
+    ax[0].text(0.98, 0.03, "\n".join(lines), transform=ax[0].transAxes, fontsize=7, va="bottom", ha="right",
+               bbox=dict(boxstyle="round", fc="w", ec="0.7"))
     ax[0].set(xlabel=f"punch travel from the {H0:g} mm plate distance, mm", xlim=(0, w.max()), ylim=(0, None))
+    sec = ax[0].secondary_xaxis("top", functions=(lambda v: 100 * v / H0, lambda p: p * H0 / 100))
+    sec.set_xlabel("compression, %", fontsize=8)
     ax[0].set_title(f"{cell}: seams every {d:g} mm, yarn level against the macro layer", fontsize=9)
     ax[0].legend(fontsize=7, loc="upper left")
     for name, mk in (("plate_contacts", "o-"), ("cushions_touched", "s-")):
@@ -397,6 +400,37 @@ def seamed_chart(ds):
     ax[1].set(xlabel="punch travel, mm", ylabel="count, 1")
     ax[1].set_title(f"{cell}: the cushion meeting the punch (yarn level)", fontsize=9)
     ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def strip_chart(ds):
+    """A strip of seam cells under one punch against the macro layer's predictions from single
+    cushions (``strip_vs_macro.nc``): stress over compression, and the cushion heights."""
+    plt = pyplot()
+    cell = cell_label(ds)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.6))
+    e = 100 * ds.strain.values
+    _tag(a1, "kPa", "compressive stress", a1.plot(e, ds.stress_strip.values, "ko-", ms=3,
+                                                  label=f"yarn level: strip of {ds.attrs['seams']} seam cells"))
+    for key, ls in (("cushion_laws", "s--"), ("shifted_law", "^--"), ("columns", "v:")):
+        v = ds[f"stress_{key}"]
+        _tag(a1, "kPa", None, a1.plot(e, v.values, ls, ms=3, label=f"{v.attrs.get('long_name', key)} (error "
+                                      f"{100 * float(ds.attrs[f'error_{key}']):.1f} %)"))
+    a1.set(xlabel="compression, % (plate travel / 20 mm)", xlim=(0, None), ylim=(0, None))
+    a1.set_title(f"{cell}: seam distance {ds.attrs['seam_distance_mm']:.4g} mm, strip against the macro layer\n"
+                 f"error = {ERROR_DEFINITION} to {e[-1]:.0f} %", fontsize=9)
+    a1.legend(fontsize=7, loc="upper left")
+    k = ds.sizes["cushion"]
+    _tag(a2, "mm", None, a2.bar(np.arange(k) - 0.2, ds.cushion_height_strip.values, 0.4, label="in the strip"))
+    _tag(a2, "mm", "cushion height", a2.bar(np.arange(k) + 0.2, ds.cushion_height_single.values, 0.4,
+                                            label="single seam cell, both seams at the left eps0"))
+    eps = ds.prestrain.values
+    a2.set_xticks(np.arange(k), [f"cushion {i + 1}: seams at\neps0 {eps[i]:.3f} | {eps[(i + 1) % k]:.3f}"
+                                 for i in range(k)])
+    a2.set(ylim=(0.0, 1.05 * _thickness(ds)))
+    a2.set_title(f"{cell}: cushion heights", fontsize=9)
+    a2.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     return fig
 

@@ -20,6 +20,7 @@ from .charts import (
     seam_profile_chart,
     seamed_chart,
     speed_accuracy_chart,
+    strip_chart,
 )
 
 __all__ = ["KINDS", "chart", "dataset_kind", "generic_chart", "homogenization_chart", "knit_tensile_chart",
@@ -270,7 +271,7 @@ def knit_tensile_chart(ds):
 KINDS = {"compression": compression_chart, "seam_profile": seam_profile_chart, "macro_curve": macro_chart,
          "macro_curves": macro_chart, "cushions": cushions_chart, "seamed_vs_macro": seamed_chart,
          "speed_accuracy": speed_accuracy_chart, "homogenization": homogenization_chart, "study": study_chart,
-         "knit_tensile": knit_tensile_chart}
+         "knit_tensile": knit_tensile_chart, "strip_vs_macro": strip_chart}
 
 
 def dataset_kind(ds) -> str:
@@ -290,6 +291,8 @@ def dataset_kind(ds) -> str:
         return "seam_profile"
     if "stress_yarn" in v:
         return "seamed_vs_macro"
+    if "stress_strip" in v and "cushion" in dims:
+        return "strip_vs_macro"
     if "error" in v and "seconds" in v and "model" in dims and "question" in v:
         return "speed_accuracy"
     if "force" in v and "plate_displacement" in dims and "specimen" in dims:

@@ -28,11 +28,12 @@ import time
 import numpy as np
 import xarray as xr
 
+from ..cache import cached
 from ..cells import Cell
 from ..errors import InputError
 from ..model.results import Status, set_status
 from ..validate import check_int, check_number
-from .compress import seam_compression, strain_levels
+from .compress import strain_levels
 from .foundation import seam_table
 from .measure import measure_profile
 from .press import press_sewn
@@ -77,7 +78,7 @@ def _force_on(ds: xr.Dataset, strain: np.ndarray) -> np.ndarray:
 
 
 def strip_check(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1.0), strain: float = 0.5,
-                steps: int = 25, cache: bool = True, curve=None) -> xr.Dataset:
+                steps: int = 25, cache: bool = True, curve=None, singles: dict | None = None) -> xr.Dataset:
     """The strip of ``len(factors)`` seams (seam i sewn with ``factors[i]`` x the calibrated pre-strain)
     under one punch at yarn level, against the macro layer's three predictions (module docstring).
 
@@ -91,8 +92,12 @@ def strip_check(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1
     pressed; each prediction once its inputs exist; the inputs' own computation), status.
 
     ``curve``: the unseamed law of the column model (default the engine's, :func:`homtex.macro.engine_law`).
+    ``singles``: {factor: press Dataset} single cells pressed before (``seam_compression`` of the
+    cell sewn with that factor x the calibrated stitch, on the same levels or further), used instead
+    of pressing them again; their time is then not in ``seconds_inputs``.
     """
-    from ..macro import macro_curve  # the macro layer is built on the seam models: a check of it is its client
+    # the macro layer is built on the seam models: a check of it is its client
+    from ..macro import cushion_law, macro_curve
 
     factors = np.asarray(factors, dtype=float).reshape(-1)
     if factors.size < 2 or not np.all((factors > 0) & np.isfinite(factors)):
@@ -108,11 +113,17 @@ def strip_check(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1
     levels = strain_levels(strain, steps)
     # single cushions: each pre-strain sewn and pressed alone
     t_in = time.perf_counter()
+    given = {round(float(f), 9): v for f, v in (singles or {}).items()}
     singles, profiles = [], []
-    for e in eps:
-        singles.append(seam_compression(cell, seam_distance=seam_distance, prestrain=float(e), strain=strain,
-                                        steps=steps, cache=cache))
-        profiles.append(seam_profile(cell, seam_distance=seam_distance, prestrain=float(e), cache=cache))
+    for f, e in zip(factors, eps):
+        # the calibrated stitch by its default (None), so its sewn state is the one cached for it
+        pre = None if float(f) == 1.0 and eps_cal < 0.95 else float(e)
+        pressed = given.get(round(float(f), 9))
+        if pressed is None or float(pressed.strain.values[-1]) < strain - 1e-9:
+            pressed = cushion_law(cell, seam_distance=seam_distance, prestrain=pre, strain=strain, steps=steps,
+                                  cache=cache)
+        singles.append(pressed)
+        profiles.append(seam_profile(cell, seam_distance=seam_distance, prestrain=pre, cache=cache))
     t_inputs = time.perf_counter() - t_in
     # the strip at yarn level
     t0 = time.perf_counter()
@@ -120,8 +131,13 @@ def strip_check(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1
     t_sew = time.perf_counter() - t0
     if sewn.status == "failed" and sewn.state is None:
         raise InputError(f"strip_check: the strip could not be sewn: {sewn.detail}")
-    press = press_sewn(sewn, levels, thickness=H0)
-    t_strip = time.perf_counter() - t0
+    key = {"seam_distance": float(seam_distance), "prestrain": [float(e) for e in eps], "levels": levels}
+    press = cached("strip_press", cell, key, lambda: press_sewn(sewn, levels, thickness=H0)) if cache \
+        else press_sewn(sewn, levels, thickness=H0)
+    # a press or sewing read from the cache took its own time once: report that, not the read
+    t_strip = max(time.perf_counter() - t0, float(press.attrs.get("seconds", 0.0))
+                  + float(sewn.attrs.get("seconds", 0.0)))
+    t_sew = max(t_sew, float(sewn.attrs.get("seconds", 0.0)))
     e_grid = press.strain.values
     y = press.stress.values
     hc_strip = strip_cushions(sewn)

@@ -28,10 +28,8 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+from _common import parser, save_figure, save_netcdf, setup  # noqa: E402
 
 log = logging.getLogger("studies")
 
@@ -62,31 +60,11 @@ def main(argv=None):
 
 
 def chart(ds, path):
-    """The strip's curve against the three predictions, and the cushion heights, as a PNG."""
-    plt = pyplot()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.6))
-    e = 100 * ds.strain.values
-    a1.plot(e, ds.stress_strip.values, "ko-", ms=3, label=f"yarn level: strip of {ds.attrs['seams']} seam cells")
-    a1.plot(e, ds.stress_cushion_laws.values, "s--", ms=3,
-            label=f"single cushions' laws, mean (error {100 * ds.attrs['error_cushion_laws']:.1f} %)")
-    a1.plot(e, ds.stress_shifted_law.values, "^--", ms=3,
-            label=f"one cushion law shifted by height (error {100 * ds.attrs['error_shifted_law']:.1f} %)")
-    a1.plot(e, ds.stress_columns.values, "v:", ms=3,
-            label=f"column model (error {100 * ds.attrs['error_columns']:.1f} %)")
-    a1.set(xlabel="compression strain, % (plate travel / 20 mm)", ylabel="stress, kPa",
-           title=f"seam distance {ds.attrs['seam_distance_mm']:.1f} mm: strip against the macro layer")
-    a1.legend(fontsize=7)
-    k = ds.sizes["cushion"]
-    a2.bar(np.arange(k) - 0.2, ds.cushion_height_strip.values, 0.4, label="in the strip")
-    a2.bar(np.arange(k) + 0.2, ds.cushion_height_single.values, 0.4,
-           label="single seam cell, both seams at the left eps0")
-    eps = ds.prestrain.values
-    a2.set_xticks(np.arange(k), [f"cushion {i + 1}: seams at\neps0 {eps[i]:.3f} | {eps[(i + 1) % k]:.3f}"
-                                 for i in range(k)])
-    a2.set(ylabel="cushion height, mm", title="cushion heights", ylim=(0.0, 21.0))
-    a2.legend(fontsize=7)
-    fig.tight_layout()
-    save_figure(fig, path)
+    """The strip's curve against the three predictions, and the cushion heights, as a PNG
+    (:func:`homtex.output.charts.strip_chart`, the main job's chart)."""
+    from homtex.output.charts import strip_chart
+
+    save_figure(strip_chart(ds), path)
 
 
 if __name__ == "__main__":
