@@ -386,7 +386,7 @@ def seamed_chart(ds):
                          f"{100 * float(ds.attrs.get('end_strain', 0.7)):.0f} %")
     if "max_relative_error" in ds.attrs:        # files of the linear seam cell (before the engine)
         lines.append(f"macro {100 * float(ds.attrs['max_relative_error']):.1f} % (0 - {w_err:g} mm)")
-    ax[0].text(0.98, 0.03, "\n".join(lines), transform=ax[0].transAxes, fontsize=7, va="bottom", ha="right",
+    ax[0].text(0.02, 0.72, "\n".join(lines), transform=ax[0].transAxes, fontsize=7, va="top", ha="left",
                bbox=dict(boxstyle="round", fc="w", ec="0.7"))
     ax[0].set(xlabel=f"punch travel from the {H0:g} mm plate distance, mm", xlim=(0, w.max()), ylim=(0, None))
     sec = ax[0].secondary_xaxis("top", functions=(lambda v: 100 * v / H0, lambda p: p * H0 / 100))
@@ -495,7 +495,7 @@ def speed_accuracy_chart(ds, *, floor: float = 1e-6):
     ax.set_xlim(t.min() / 4, t.max() * 4)
     ax.set_ylim(floor / 3, max(1.0, e.max() * 3))
     ax.set_title(f"{cell}: which model does a question need? (references: error 0, drawn at {floor:g})", fontsize=9)
-    ax.legend(fontsize=7, loc="center left")
+    ax.legend(fontsize=7, loc="lower left")
     place_labels(ax, np.column_stack([t, e]), [str(i + 1) for i in range(len(t))])
     tab.axis("off")
     rows = [[str(i + 1), q.split(" ")[0], m, f"{s:.3g}", "0 (ref.)" if err == 0 else f"{err:.2e}"]
