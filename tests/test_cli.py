@@ -76,6 +76,23 @@ def test_run_quick_writes_the_paper_study(tmp_path):
     assert "Cushion heights" in text and "Stage times" in text and "Strip of 3" in text
 
 
+def test_background_job_returns_its_result_and_is_stopped_on_close():
+    """The main job's second process (the strip, sewn and pressed while the other stages run):
+    its result comes back, and closing it (an error in the main process) stops a running job at
+    once instead of waiting minutes for it."""
+    import functools
+    import time
+
+    from homtex.app.main_job import _Background
+
+    job = _Background(dict, {"seam_distance": 18.0, "factors": (1.1, 0.9)})
+    assert job.result() == {"seam_distance": 18.0, "factors": (1.1, 0.9)}
+    job = _Background(functools.partial(time.sleep, 120.0), {})
+    t0 = time.perf_counter()
+    job.close()
+    assert time.perf_counter() - t0 < 10.0
+
+
 def test_bad_input_is_a_message_not_a_traceback(tmp_path):
     p = subprocess.run([sys.executable, "-m", "homtex.app.cli", "seam", str(tmp_path / "missing.toml"),
                         "--distance", "24"], capture_output=True, text=True)
@@ -402,7 +419,7 @@ def test_every_argument_is_documented_with_its_default():
             assert a.help, (name, a.dest)
             text = a.help % {"default": a.default}
             assert "default" in text or a.required or not a.option_strings, (name, a.dest, text)
-            if a.option_strings and a.type is not None and a.dest not in ("seed", "steps", "sel"):
+            if a.option_strings and a.type is not None and a.dest not in ("seed", "steps", "sel", "workers"):
                 assert any(u in text for u in ("mm", "fraction", "%", "dimensionless")), (name, a.dest, text)
 
 

@@ -69,7 +69,7 @@ def cmd_run(args) -> None:
     from .main_job import main_job
 
     t0 = time.perf_counter()
-    outputs = main_job(_out(args, "results"), quick=args.quick)
+    outputs = main_job(_out(args, "results"), quick=args.quick, workers=args.workers)
     _say(f"\nmain job finished in {time.perf_counter() - t0:.1f} s; outputs:")
     for name, path in outputs.items():
         _say(f"  {name:<28s} {path}")
@@ -378,8 +378,8 @@ def build_parser() -> Parser:
                    help="show the full traceback of an error instead of a one-line message")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=Parser)
 
-    s = sub.add_parser("run", help="the main job: the paper's study end to end on the engine (about 20 min "
-                       "from a cold result cache)",
+    s = sub.add_parser("run", help="the main job: the paper's study end to end on the engine (about 13 min "
+                       "from a cold result cache on two cores)",
                        description="The main job on the large-motion engine: lattice demo, spacer cell, unseamed "
                        "compression to 70 %%, cushions sewn from the yarns (18, 24, 43 mm; low needle-thread "
                        "setting), the seamed 24 mm specimen to 70 %% against the macro layer, macro curves, a "
@@ -390,6 +390,9 @@ def build_parser() -> Parser:
     s.add_argument("--quick", action="store_true",
                    help="every stage on seam cells of one to three fabric repeats, sewn frictionless in one "
                    "ramp level (about 1 min; checks the pipeline, not the paper's numbers; default: off)")
+    s.add_argument("--workers", type=int, choices=(1, 2), default=None,
+                   help="processes: with 2 the strip of seam cells is sewn and pressed in a second process "
+                   "while the other stages run (default: 2 on a machine with two cores or more, else 1)")
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("cell", help="summary and picture of a unit cell",

@@ -31,7 +31,7 @@ from ..seams import seam_profile
 from ..seams.compress import strain_levels
 from ..seams.foundation import seam_table
 from ..seams.profile import PAPER_SETTING, paper_setting
-from ..seams.strip import strip_check
+from ..seams.strip import strip_check, strip_singles
 from .paths import heartbeat
 from .stages import _attrs, _save, _timed, describe
 
@@ -280,17 +280,28 @@ def seamed_stage(cell, unseamed, profiles, out: Path, *, seam_distance=24.0, str
 
 # ----------------------------------------------------------------------------- strip
 def strip_stage(cell, out: Path, *, seam_distance=24.0, factors=(1.0, 0.9), strain=0.5, steps=25,
-                curve=None, singles=None) -> tuple:
+                curve=None, singles=None, background=None) -> tuple:
     """A strip of ``len(factors)`` seam cells side by side (seam i sewn with ``factors[i]`` x the
     calibrated stitch) under one punch at yarn level against the macro layer's predictions from
     single cushions (:func:`homtex.seams.strip.strip_check`; ``singles`` {factor: pressed single
-    cell} computed before, e.g. the seamed stage's). Returns (Dataset, {name: path})."""
+    cell} computed before, e.g. the seamed stage's; ``background`` a job computing
+    :func:`homtex.seams.strip.strip_yarn` with these arguments in another process, waited for once
+    the single cells are pressed). Returns (Dataset, {name: path})."""
+    t0 = time.perf_counter()
+    kw = dict(seam_distance=seam_distance, factors=factors, strain=strain, steps=steps, curve=curve)
+    yarn = None
+    if background is not None:
+        # the single cells here while the strip finishes there; then the strip from that process
+        with heartbeat(f"single cells of the strip ({seam_distance:g} mm) pressed to {100 * strain:g} %"):
+            strip_singles(cell, seam_distance=seam_distance, factors=factors, strain=strain, steps=steps,
+                          given=singles)
+        with heartbeat(f"waiting for the strip of {len(factors)} seam cells (second process)"):
+            yarn = background.result()
     with heartbeat(f"strip of {len(factors)} seam cells ({seam_distance:g} mm) under one punch to "
                    f"{100 * strain:g} %"):
-        t0 = time.perf_counter()
-        ds = strip_check(cell, seam_distance=seam_distance, factors=factors, strain=strain, steps=steps, curve=curve,
-                         singles=singles)
+        ds = strip_check(cell, singles=singles, yarn=yarn, **kw)
         ds.attrs["seconds_total"] = time.perf_counter() - t0
+        ds.attrs["strip_process"] = "second process, from the job's start" if background is not None else "main process"
     describe(ds, "strip_vs_macro", cell)
     nc = _save(_attrs(ds, title="strip of seam cells under one punch against the macro layer"),
                out / "strip_vs_macro.nc")

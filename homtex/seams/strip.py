@@ -40,7 +40,7 @@ from .press import press_sewn
 from .profile import seam_profile, sewn_seam
 from .sew import SewnSeam
 
-__all__ = ["strip_check", "strip_cushions", "sew_strip"]
+__all__ = ["strip_check", "strip_cushions", "strip_singles", "strip_yarn", "sew_strip"]
 
 log = logging.getLogger(__name__)
 
@@ -77,8 +77,76 @@ def _force_on(ds: xr.Dataset, strain: np.ndarray) -> np.ndarray:
     return np.interp(strain, e, s, right=np.nan)
 
 
+def strip_yarn(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1.0), strain: float = 0.5,
+               steps: int = 25, cache: bool = True) -> tuple:
+    """The yarn-level half of :func:`strip_check`: the strip sewn (seam i with ``factors[i]`` x the
+    calibrated pre-strain) and pressed to ``strain`` in ``steps`` levels, both from the result cache
+    when there. Returns (SewnSeam, press Dataset); their ``attrs["seconds"]`` hold the time each
+    took when it was computed. Independent of the single cells, so a caller may run it in another
+    process while those are pressed (the main job does)."""
+    factors = _check_factors(factors)
+    seam_distance = check_number(seam_distance, "seam_distance", gt=0.0, le=1e3)
+    strain = check_number(strain, "strain", gt=0.0, lt=1.0)
+    steps = check_int(steps, "steps", ge=2, le=1000)
+    eps = _strip_prestrains(cell, factors)
+    levels = strain_levels(strain, steps)
+    t0 = time.perf_counter()
+    sewn = sew_strip(cell, seam_distance=seam_distance, prestrain=eps, cache=cache)
+    sewn.attrs.setdefault("seconds", time.perf_counter() - t0)
+    if sewn.status == "failed" and sewn.state is None:
+        raise InputError(f"strip_check: the strip could not be sewn: {sewn.detail}")
+    key = {"seam_distance": float(seam_distance), "prestrain": [float(e) for e in eps], "levels": levels}
+    H0 = float(cell.info["thickness"])
+    press = cached("strip_press", cell, key, lambda: press_sewn(sewn, levels, thickness=H0)) if cache \
+        else press_sewn(sewn, levels, thickness=H0)
+    return sewn, press
+
+
+def strip_singles(cell: Cell, *, seam_distance: float, factors, strain: float, steps: int, cache: bool = True,
+                  given: dict | None = None) -> tuple:
+    """The single-cushion half of :func:`strip_check`: for each factor the seam cell sewn with
+    factor x the calibrated stitch alone, its profile and its press to ``strain`` (cushion laws,
+    from the result cache when there; ``given`` {factor: press Dataset} pressed before).
+    Returns ([press Dataset], [profile Dataset], seconds: the time the presses not given took
+    when they were computed, sewing included)."""
+    from ..macro import cushion_law
+
+    factors = _check_factors(factors)
+    eps_cal = float(seam_table(cell).get("prestrain", 0.0))
+    eps = _strip_prestrains(cell, factors)
+    given = {round(float(f), 9): v for f, v in (given or {}).items()}
+    singles, profiles, seconds = [], [], 0.0
+    for f, e in zip(factors, eps):
+        # the calibrated stitch by its default (None), so its sewn state is the one cached for it
+        pre = None if float(f) == 1.0 and eps_cal < 0.95 else float(e)
+        pressed = given.get(round(float(f), 9))
+        if pressed is None or float(pressed.strain.values[-1]) < strain - 1e-9:
+            pressed = cushion_law(cell, seam_distance=seam_distance, prestrain=pre, strain=strain, steps=steps,
+                                  cache=cache)
+            seconds += float(pressed.attrs.get("seconds_total", pressed.attrs.get("seconds", 0.0)))
+        singles.append(pressed)
+        profiles.append(seam_profile(cell, seam_distance=seam_distance, prestrain=pre, cache=cache))
+    return singles, profiles, seconds
+
+
+def _check_factors(factors) -> np.ndarray:
+    factors = np.asarray(factors, dtype=float).reshape(-1)
+    if factors.size < 2 or not np.all((factors > 0) & np.isfinite(factors)):
+        raise InputError(f"factors: at least two positive numbers, got {factors.tolist()}")
+    return factors
+
+
+def _strip_prestrains(cell: Cell, factors: np.ndarray) -> np.ndarray:
+    """Each seam's length-controlled pre-strain: its factor x the calibrated one (at most 0.95)."""
+    eps_cal = float(seam_table(cell).get("prestrain", 0.0))
+    if eps_cal <= 0.0:
+        raise InputError("strip_check needs a length-controlled calibrated stitch ([parameters.seam] prestrain)")
+    return np.minimum(factors * eps_cal, 0.95)
+
+
 def strip_check(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1.0), strain: float = 0.5,
-                steps: int = 25, cache: bool = True, curve=None, singles: dict | None = None) -> xr.Dataset:
+                steps: int = 25, cache: bool = True, curve=None, singles: dict | None = None,
+                yarn: tuple | None = None) -> xr.Dataset:
     """The strip of ``len(factors)`` seams (seam i sewn with ``factors[i]`` x the calibrated pre-strain)
     under one punch at yarn level, against the macro layer's three predictions (module docstring).
 
@@ -95,49 +163,25 @@ def strip_check(cell: Cell, *, seam_distance: float = 24.0, factors=(1.1, 0.9, 1
     ``singles``: {factor: press Dataset} single cells pressed before (``seam_compression`` of the
     cell sewn with that factor x the calibrated stitch, on the same levels or further), used instead
     of pressing them again; their time is then not in ``seconds_inputs``.
+    ``yarn``: (sewn strip, press Dataset) from :func:`strip_yarn` with the same arguments, computed
+    before (e.g. in another process); default: computed here (or read from the cache).
     """
     # the macro layer is built on the seam models: a check of it is its client
-    from ..macro import cushion_law, macro_curve
+    from ..macro import macro_curve
 
-    factors = np.asarray(factors, dtype=float).reshape(-1)
-    if factors.size < 2 or not np.all((factors > 0) & np.isfinite(factors)):
-        raise InputError(f"factors: at least two positive numbers, got {factors.tolist()}")
+    factors = _check_factors(factors)
     seam_distance = check_number(seam_distance, "seam_distance", gt=0.0, le=1e3)
     strain = check_number(strain, "strain", gt=0.0, lt=1.0)
     steps = check_int(steps, "steps", ge=2, le=1000)
-    eps_cal = float(seam_table(cell).get("prestrain", 0.0))
-    if eps_cal <= 0.0:
-        raise InputError("strip_check needs a length-controlled calibrated stitch ([parameters.seam] prestrain)")
-    eps = np.minimum(factors * eps_cal, 0.95)
+    eps = _strip_prestrains(cell, factors)
     H0 = float(cell.info["thickness"])
-    levels = strain_levels(strain, steps)
-    # single cushions: each pre-strain sewn and pressed alone
-    t_in = time.perf_counter()
-    given = {round(float(f), 9): v for f, v in (singles or {}).items()}
-    singles, profiles = [], []
-    for f, e in zip(factors, eps):
-        # the calibrated stitch by its default (None), so its sewn state is the one cached for it
-        pre = None if float(f) == 1.0 and eps_cal < 0.95 else float(e)
-        pressed = given.get(round(float(f), 9))
-        if pressed is None or float(pressed.strain.values[-1]) < strain - 1e-9:
-            pressed = cushion_law(cell, seam_distance=seam_distance, prestrain=pre, strain=strain, steps=steps,
-                                  cache=cache)
-        singles.append(pressed)
-        profiles.append(seam_profile(cell, seam_distance=seam_distance, prestrain=pre, cache=cache))
-    t_inputs = time.perf_counter() - t_in
-    # the strip at yarn level
-    t0 = time.perf_counter()
-    sewn = sew_strip(cell, seam_distance=seam_distance, prestrain=eps, cache=cache)
-    t_sew = time.perf_counter() - t0
-    if sewn.status == "failed" and sewn.state is None:
-        raise InputError(f"strip_check: the strip could not be sewn: {sewn.detail}")
-    key = {"seam_distance": float(seam_distance), "prestrain": [float(e) for e in eps], "levels": levels}
-    press = cached("strip_press", cell, key, lambda: press_sewn(sewn, levels, thickness=H0)) if cache \
-        else press_sewn(sewn, levels, thickness=H0)
-    # a press or sewing read from the cache took its own time once: report that, not the read
-    t_strip = max(time.perf_counter() - t0, float(press.attrs.get("seconds", 0.0))
-                  + float(sewn.attrs.get("seconds", 0.0)))
-    t_sew = max(t_sew, float(sewn.attrs.get("seconds", 0.0)))
+    singles, profiles, t_inputs = strip_singles(cell, seam_distance=seam_distance, factors=factors, strain=strain,
+                                                steps=steps, cache=cache, given=singles)
+    # the strip at yarn level (computed before, e.g. in another process, or now)
+    sewn, press = yarn if yarn is not None else strip_yarn(cell, seam_distance=seam_distance, factors=factors,
+                                                           strain=strain, steps=steps, cache=cache)
+    t_sew = float(sewn.attrs.get("seconds", 0.0))
+    t_strip = t_sew + float(press.attrs.get("seconds", 0.0))
     e_grid = press.strain.values
     y = press.stress.values
     hc_strip = strip_cushions(sewn)
