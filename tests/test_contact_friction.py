@@ -15,7 +15,7 @@ from homtex.contact.friction import (
     plate_friction_lag,
 )
 from homtex.contact.plates import plate_potential
-from homtex.contact.potential import Enforcement
+from homtex.contact.potential import Enforcement, pair_potential
 from homtex.contact.stencil import pair_stencil
 from homtex.errors import InputError
 
@@ -160,6 +160,40 @@ def test_pair_sliding_force_is_mu_lambda():
     assert np.allclose(Fb, [-0.4 * lam, 0, 0], rtol=1e-6, atol=1e-12)
     assert np.allclose(-ev.grad[:2].sum(axis=0), -Fb)
     assert ev.dissipation == pytest.approx(0.4 * lam * 0.02, rel=1e-6)
+
+
+def thick_crossing(depth, angle, n=20, h=0.1, core=0.05, outer=0.5):
+    """Two straight yarns of n elements of length h (mm) crossing at ``angle`` degrees, hard cores of
+    radius ``core`` under compressible shells to radius ``outer``, pressed ``depth`` into each other:
+    a contact spread over many elements, as a thick knitting yarn's."""
+    s = (np.arange(n + 1) - n / 2) * h
+    th = np.radians(angle)
+    x = np.vstack([np.c_[s, 0 * s, 0 * s], np.c_[s * np.cos(th), s * np.sin(th), np.full_like(s, 2 * outer - depth)]])
+    chain = np.c_[np.arange(n), np.arange(1, n + 1)]
+    A, B = np.meshgrid(np.arange(n), np.arange(n) + n, indexing="ij")
+    st = pair_stencil(np.vstack([chain, chain + n + 1]), np.full(2 * n, core), A.ravel(), B.ravel())
+    enf = Enforcement("shell", ghat=1e-3, shell=2 * (outer - core), shell_stiffness=2.0, shell_exponent=3.0)
+    return x, st, enf
+
+
+@pytest.mark.parametrize("depth, angle", [(0.05, 90.0), (0.6, 90.0), (0.3, 30.0)])
+def test_a_rigid_slide_of_a_thick_yarn_rubs_at_mu_N(depth, angle):
+    """A contact over dozens of segment pairs, most terms of the inclusion-exclusion negative: slid
+    rigidly across (sliding, |slip| >> eps), the upper yarn feels mu N against the slip, N the
+    contact force pressing it, and friction dissipates mu N |slip| (the signed terms cancel exactly
+    when every term slips alike; docs/contact.md)."""
+    x, st, enf = thick_crossing(depth, angle)
+    n = len(x) // 2
+    N = -pair_potential(x, st, enf, hessian=False).grad[n:, 2].sum()
+    lag = pair_friction_lag(x, st, enf, mu=0.3)
+    assert N > 0 and len(lag) > 40 and (lag.lam < 0).sum() > 100
+    for slide in ([0.05, 0, 0], [0, 0.05, 0], [0.03, -0.04, 0]):
+        xs = x.copy()
+        xs[n:] += slide
+        ev = friction_potential(lag, xs, x, 1e-4)
+        F = -ev.grad[n:].sum(axis=0)
+        assert F == pytest.approx(-0.3 * N * np.array(slide) / 0.05, rel=1e-9, abs=1e-12 * N)
+        assert ev.dissipation == pytest.approx(0.3 * N * 0.05, rel=1e-9)
 
 
 def stick_slip_run(mu, N, k_t, du, steps, eps=1e-4):

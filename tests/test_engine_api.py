@@ -203,3 +203,16 @@ def test_a_perfect_column_pressed_between_plates_buckles_onto_the_elastica():
     assert float(p.plate_force[-1, 1]) == pytest.approx((2 * ellipk(m) / np.pi) ** 2 * Pcr, rel=1e-3)
     assert np.hypot(res.x[:, 0], res.x[:, 1]).max() == pytest.approx(L * np.sqrt(m) / ellipk(m), rel=0.02)
     assert bool(p.stable[-1])
+
+
+def test_friction_that_gives_energy_back_is_named_with_its_cause():
+    """Coulomb friction only dissipates: a ledger whose friction energy falls below zero (beyond 1 %
+    of the driven work) is flagged with the cause, a round-off dip is not."""
+    from homtex.analysis.energy import ledger_check
+
+    W, lv, zero = np.array([0.0, 1.0, 2.0, 3.0]), np.array([0.0, 1 / 3, 2 / 3, 1.0]), np.zeros(4)
+    assert ledger_check(W, zero, zero, zero, lv, friction_energy=[0.0, 0.4, 0.8, 1.2]) == ""
+    assert ledger_check(W, zero, zero, zero, lv, friction_energy=[0.0, -0.005, -0.01, -0.02]) == ""
+    msg = ledger_check(W, zero, zero, zero, lv, friction_energy=[0.0, 0.1, -0.5, -0.9])
+    assert "friction gave energy back" in msg and "-0.9 N mm" in msg and "load factor 1" in msg
+    assert "elements at least as long as the yarn's radius" in msg

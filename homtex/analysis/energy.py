@@ -60,11 +60,13 @@ def balance(external_work, prestrain_work, strain_energy, contact_energy=0.0, fr
 
 def ledger_check(external_work, prestrain_work, stabilization_energy, energy_balance, levels,
                  level_name: str = "load factor", driven: bool = True, limit: float = CHECK_LIMIT,
-                 floor: float = 0.0) -> str:
+                 floor: float = 0.0, friction_energy=None) -> str:
     """'' if the path passes, else what fails and where: the balance beyond ``limit`` at any state,
     or (``driven``: loads, motions or a pre-strain ramp did work) a stabilisation beyond ``limit``
     of the driven work (a relaxation with no driver reports what it released, unflagged);
-    stabilisation at most ``floor`` (N mm, round-off) is not counted."""
+    stabilisation at most ``floor`` (N mm, round-off) is not counted. ``friction_energy`` (the
+    energy friction dissipated so far, N mm, one per state): friction that gave energy back (below
+    -``limit`` of the driven work) is named with its cause."""
     W = np.abs(np.asarray(external_work, dtype=float) + np.asarray(prestrain_work, dtype=float))
     S = np.asarray(stabilization_energy, dtype=float)
     bal = np.asarray(energy_balance, dtype=float)
@@ -84,7 +86,27 @@ def ledger_check(external_work, prestrain_work, stabilization_energy, energy_bal
                     f"(limit {100 * limit:g} %)")
     if bal.size and not np.all(np.isfinite(bal)):
         msgs.append("the energy ledger is not finite")
+    if friction_energy is not None:
+        msgs.extend(_friction_check(np.asarray(friction_energy, dtype=float), W, lv, level_name, limit, floor))
     return "; ".join(msgs)
+
+
+def _friction_check(D, W, lv, level_name, limit, floor) -> list:
+    """The ledger's friction must dissipate: D (states,) N mm, W (states,) |driven work|."""
+    if not D.size:
+        return []
+    bound = np.maximum(limit * np.maximum.accumulate(W), floor)
+    k = int(np.argmin(D + bound))
+    if D[k] + bound[k] >= 0.0:
+        return []
+    # the lagged friction acts per term of the pair potential's inclusion-exclusion, each at its own
+    # closest point with a signed weight: exact for a rigid slide, but where a thick yarn's contact
+    # spreads over many short elements the negative terms slip more than the positive ones they cancel
+    return [f"friction gave energy back ({D[k]:.3g} N mm dissipated by {level_name} {lv[k]:.4g}, against "
+            f"{W[k]:.3g} N mm of driven work): friction acts per term of the contact decomposition, which is not "
+            "dissipative where a yarn's contact spreads over many short elements (a thick or compressible yarn; "
+            "docs/contact.md, 'Friction and thick yarns'); use elements at least as long as the yarn's radius, "
+            "or friction 0"]
 
 
 #: 3-point Gauss-Legendre rule on [0, 1] (exact for the degree-5 integrand of :func:`hermite_work`)

@@ -398,7 +398,7 @@ def run_engine(frame, fixed=None, loads=None, *, contact: Contact, plates=None, 
     if status is Status.OK and len(run.rows):
         check = ledger_check(ds.external_work.values, ds.prestrain_work.values, ds.stabilization_energy.values,
                              ds.energy_balance.values, ds.load_factor.values, driven=driven,
-                             floor=sol.energy_floor)
+                             floor=sol.energy_floor, friction_energy=ds.friction_energy.values)
         if check:
             status, detail = Status.FLAGGED, check
             log.warning("solve_nonlinear: %s", check)

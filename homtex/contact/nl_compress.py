@@ -199,7 +199,8 @@ def _buckling(cv, test) -> float:
 def _checks(ds, floor: float = 0.0) -> str:
     """'' if the curve passes the energy checks, else what fails (and where)."""
     return ledger_check(ds["external_work"].values, ds["prestrain_work"].values, ds["stabilization_energy"].values,
-                        ds["energy_balance"].values, ds["strain"].values, level_name="strain", floor=floor)
+                        ds["energy_balance"].values, ds["strain"].values, level_name="strain", floor=floor,
+                        friction_energy=ds["friction_energy"].values if "friction_energy" in ds else None)
 
 
 def run_nonlinear_compression(test, targets, *, control: str, contact: Contact, friction_spec: dict | None = None,

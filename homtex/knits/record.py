@@ -131,7 +131,8 @@ def finish(ds, rec, status, detail, sol, info):
     """Status, the energy checks, the failure-stress strain and the peak's place; returns ds."""
     if status is Status.OK:
         check = ledger_check(ds.external_work.values, np.zeros(ds.sizes["strain"]), ds.stabilization_energy.values,
-                             ds.energy_balance.values, ds.strain.values, level_name="strain", floor=sol.energy_floor)
+                             ds.energy_balance.values, ds.strain.values, level_name="strain", floor=sol.energy_floor,
+                             friction_energy=ds.friction_energy.values)
         if check:
             status, detail = Status.FLAGGED, check
             log.warning("tensile: %s", check)

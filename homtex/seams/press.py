@@ -187,7 +187,8 @@ def press_sewn(sewn: SewnSeam, levels, *, thickness: float, max_cuts: int = 6, r
                     branch_switches=np.array(stepper.events, dtype=float).reshape(-1), n_nodes=int(frame.n_nodes))
     if status is Status.OK and len(rows["strain"]):
         check = ledger_check(ds.external_work.values, np.zeros(ds.sizes["strain"]), ds.stabilization_energy.values,
-                             ds.energy_balance.values, ds.strain.values, level_name="strain", floor=sol.energy_floor)
+                             ds.energy_balance.values, ds.strain.values, level_name="strain", floor=sol.energy_floor,
+                             friction_energy=ds.friction_energy.values)
         if check:
             status, detail = Status.FLAGGED, check
             log.warning("seam_compression: %s", check)
