@@ -75,18 +75,32 @@ def test_pair_friction_derivatives(scale, rng):
     assert np.abs(ev.grad.sum(axis=0)).max() < 1e-14      # action = reaction
 
 
-def test_projected_pair_friction_hessian_is_psd(rng):
-    """Near a node the inclusion-exclusion gives negative terms: project=True drops them from
-    the Hessian (PSD), the gradient stays exact."""
+def test_near_a_node_the_pair_rubs_with_the_potentials_net_normal_force(rng):
+    """Near a node the pair's inclusion-exclusion has negative terms; the pair rubs once, with their
+    net (the potential's normal force on the pair), and its Hessian is PSD without projection."""
     P = np.array([[0, 0, 0], [1, 0, 0], [0.97, -0.5, 0.205], [1.02, 0.5, 0.206]])
     st = pair_stencil(EL2, [0.1, 0.1], [0], [1], degree=np.array([2, 2, 2, 2]))
     lag = pair_friction_lag(P, st, ENF, mu=0.4)
-    assert (lag.lam < 0).any()
+    assert lag.lam.shape == (1, 1)
+    assert lag.lam[0, 0] == pytest.approx(pair_potential(P, st, ENF, hessian=False).lam[0], rel=1e-12)
     x = P + rng.normal(scale=5e-4, size=P.shape)
     ex, ep = (friction_potential(lag, x, P, 1e-3, project=p) for p in (False, True))
-    assert np.array_equal(ex.grad, ep.grad) and ex.energy == ep.energy
-    assert np.linalg.eigvalsh(ep.hess[0]).min() > -1e-12 * np.abs(ep.hess[0]).max()
-    assert np.linalg.eigvalsh(ep.hess[0] - ex.hess[0]).min() > -1e-12 * np.abs(ep.hess[0]).max()
+    assert np.array_equal(ex.hess, ep.hess) and ex.energy == ep.energy
+    assert np.linalg.eigvalsh(ex.hess[0]).min() > -1e-12 * np.abs(ex.hess[0]).max()
+
+
+def test_a_patch_shares_its_net_normal_force_among_its_pressing_pairs():
+    """Pairs that share a node of either yarn form a patch; a pair whose net is negative corrects its
+    neighbours, never rubs the wrong way; separate patches and periodic images stay apart."""
+    from homtex.contact.friction import contact_patches, patch_shares
+
+    nodes = np.array([[0, 1, 10, 11], [1, 2, 10, 11], [2, 3, 11, 12], [20, 21, 30, 31], [20, 21, 30, 31]])
+    shift = np.zeros((5, 4, 3))
+    shift[4, 2:] = [5.0, 0, 0]                       # the same nodes of b, one period over
+    lab = contact_patches(nodes, shift)
+    assert lab[0] == lab[1] == lab[2] and len({lab[0], lab[3], lab[4]}) == 3
+    lam = patch_shares([0.5, -0.2, 0.3, 0.4, -0.1], nodes, shift)
+    np.testing.assert_allclose(lam, [0.5 * 0.6 / 0.8, 0.0, 0.3 * 0.6 / 0.8, 0.4, 0.0], rtol=1e-14)
 
 
 def test_coulomb_force_sliding_and_sticking_on_a_plate():
@@ -176,24 +190,30 @@ def thick_crossing(depth, angle, n=20, h=0.1, core=0.05, outer=0.5):
     return x, st, enf
 
 
-@pytest.mark.parametrize("depth, angle", [(0.05, 90.0), (0.6, 90.0), (0.3, 30.0)])
+@pytest.mark.parametrize("depth, angle", [(0.05, 90.0), (0.6, 90.0), (0.3, 30.0), (0.6, 12.0), (0.6, 5.0), (0.6, 1.0)])
 def test_a_rigid_slide_of_a_thick_yarn_rubs_at_mu_N(depth, angle):
-    """A contact over dozens of segment pairs, most terms of the inclusion-exclusion negative: slid
-    rigidly across (sliding, |slip| >> eps), the upper yarn feels mu N against the slip, N the
-    contact force pressing it, and friction dissipates mu N |slip| (the signed terms cancel exactly
-    when every term slips alike; docs/contact.md)."""
+    """A contact over dozens of segment pairs, many of them beside the crossing (their closest points
+    at a segment end) or with a negative net: slid rigidly (sliding, |slip| >> eps), the upper yarn
+    feels mu N against the slip, N the contact force pressing it, and friction dissipates mu N
+    |slip|: exactly where the yarns cross (the friction normal is the lines' common perpendicular),
+    within 1 % where they lie near parallel (the rubbing points' normal; docs/contact.md)."""
     x, st, enf = thick_crossing(depth, angle)
     n = len(x) // 2
     N = -pair_potential(x, st, enf, hessian=False).grad[n:, 2].sum()
     lag = pair_friction_lag(x, st, enf, mu=0.3)
-    assert N > 0 and len(lag) > 40 and (lag.lam < 0).sum() > 100
+    assert N > 0 and len(lag) > 40 and (lag.lam >= 0).all()
+    # the patch presses with what the potential gives (its terms' scalar sum against the vertical
+    # part of their vector sum: equal where every term pushes vertically)
+    assert lag.lam.sum() == pytest.approx(N, rel=1e-3)
+    tol = 1e-9 if angle >= 8.0 else 1e-2
     for slide in ([0.05, 0, 0], [0, 0.05, 0], [0.03, -0.04, 0]):
         xs = x.copy()
         xs[n:] += slide
         ev = friction_potential(lag, xs, x, 1e-4)
         F = -ev.grad[n:].sum(axis=0)
-        assert F == pytest.approx(-0.3 * N * np.array(slide) / 0.05, rel=1e-9, abs=1e-12 * N)
-        assert ev.dissipation == pytest.approx(0.3 * N * 0.05, rel=1e-9)
+        assert np.linalg.norm(F + 0.3 * N * np.array(slide) / 0.05) < tol * 0.3 * N
+        assert ev.dissipation == pytest.approx(0.3 * N * 0.05, rel=tol)
+        assert np.abs(ev.grad.sum(axis=0)).max() < 1e-12 * N      # action = reaction
 
 
 def stick_slip_run(mu, N, k_t, du, steps, eps=1e-4):

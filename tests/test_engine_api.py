@@ -215,4 +215,4 @@ def test_friction_that_gives_energy_back_is_named_with_its_cause():
     assert ledger_check(W, zero, zero, zero, lv, friction_energy=[0.0, -0.005, -0.01, -0.02]) == ""
     msg = ledger_check(W, zero, zero, zero, lv, friction_energy=[0.0, 0.1, -0.5, -0.9])
     assert "friction gave energy back" in msg and "-0.9 N mm" in msg and "load factor 1" in msg
-    assert "run it frictionless" in msg
+    assert "not trustworthy" in msg

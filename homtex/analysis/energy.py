@@ -99,14 +99,12 @@ def _friction_check(D, W, lv, level_name, limit, floor) -> list:
     k = int(np.argmin(D + bound))
     if D[k] + bound[k] >= 0.0:
         return []
-    # the lagged friction acts per term of the pair potential's inclusion-exclusion, each at its own
-    # closest point with a signed weight: exact for a rigid slide, but where a curved yarn's contact
-    # spreads over several elements the vertex corrections rub where nothing they cancel does
+    # the engine's friction rubs with nonnegative normal forces only (homtex.contact.friction), so
+    # this guards the ledger against a law that is not (a hand-built lag, a regression)
     return [f"friction gave energy back ({D[k]:.3g} N mm dissipated by {level_name} {lv[k]:.4g}, against "
-            f"{W[k]:.3g} N mm of driven work): friction acts per term of the contact decomposition, which is not "
-            "dissipative where a curved yarn's contact spreads over several elements (a thick or compressible yarn; "
-            "docs/contact.md, 'Friction and thick yarns', measured at 0.4-2.0 mm elements on a 1.33 mm yarn); "
-            "the forces of this path are not trustworthy: run it frictionless (friction=0)"]
+            f"{W[k]:.3g} N mm of driven work): a friction law with negative normal forces is not dissipative "
+            "(docs/contact.md, 'Friction and thick yarns'); "
+            "the forces of this path are not trustworthy"]
 
 
 #: 3-point Gauss-Legendre rule on [0, 1] (exact for the degree-5 integrand of :func:`hermite_work`)

@@ -1,9 +1,9 @@
 """Lagged, smoothed Coulomb friction for yarn-yarn pairs and yarn-plate nodes (IPC style).
 
-At the lag state x_lag (the start of the step, or of a lag iteration) every active contact
-term j freezes its normal force lambda_j (N), its closest-point weights c_j (the barycentric
-coefficients of its stencil nodes) and a tangent basis T_j (3 x 2, orthonormal, orthogonal to
-its normal). Over the step from x_start to x its tangential slip is
+At the lag state x_lag (the start of the step, or of a lag iteration) every active contact j (a
+yarn-yarn pair or a node on a plate) freezes its normal force lambda_j (N), its closest-point
+weights c_j (the barycentric coefficients of its stencil nodes) and a tangent basis T_j (3 x 2,
+orthonormal, orthogonal to its normal). Over the step from x_start to x its tangential slip is
 
     u_j = T_j^T (sum_k c_jk (x_k - x_start_k) - d_j)      (mm, 2-vector)
 
@@ -16,10 +16,18 @@ eps (mm) is the slip at which friction saturates: for |u| >= eps the force on th
 mu lambda against the slip (sliding), below it a stiff elastic stick of at most mu lambda.
 The force is -grad D; the Hessian of one contact, mu lambda c c^T (x) T M T^T with
 M = f1(y)/y I + (f1'(y) y - f1(y))/y^3 u u^T, is positive semi-definite (f0(|u|) is convex
-and the slip linear in x). Pair terms carry the signed weights of the contact potential's
-inclusion-exclusion (:mod:`.potential`): a negative term cancels a positive one of a neighbouring
-pair at the same point, so ``project=True`` leaves the negative terms out of the Hessian (a PSD
-block, stiffer than the exact one by at most the cancelled terms; the gradient stays exact).
+and the slip linear in x). A yarn-yarn pair rubs once: at its segments' closest points, in the
+plane normal to the contact (the common perpendicular of the segments' lines, which is the smooth
+yarns' normal also where a segment's closest point is clamped to its end; near parallel, where that
+is undefined, the segments' own, blended as the potential blends its forms), with its share of its
+contact patch's net normal force. The net of a pair is the sum of its contact potential's
+inclusion-exclusion terms (:mod:`.potential`); a patch is the pairs that share a node of either
+yarn, and its net normal force goes to its pairs in proportion to their positive nets, so every
+pair presses (lambda >= 0: friction only dissipates) and the patch presses with what the potential
+gives it. (Rubbing each term at its own closest point with its signed weight is exact for a rigid
+slide but gives energy back where the slip varies along a contact that spreads over several
+elements: -0.87 N mm against 0.005 N mm of work on the acrylic rib, docs/contact.md.) A rigid slide
+rubs at mu N, N the patch's normal force, for any number of pairs and any crossing angle.
 
 The energy friction dissipates over a step is its force at the end of the step times the step's
 slip, sum_j mu_j lambda_j f1(|u_j|) |u_j| (mu lambda s for a slip s >= eps): the lagged potential
@@ -36,7 +44,9 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from numba import njit, prange
+from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
 from .distance import _d2_at, _ee_classify, _sin2_angle
@@ -57,6 +67,10 @@ from .potential import (
 from .stencil import PairStencil
 
 log = logging.getLogger(__name__)
+
+#: sin^2 of the crossing angles between which a pair's friction normal turns from its rubbing
+#: points' (near parallel) to the common perpendicular of its segments' lines (crossing)
+LINE_NORMAL_SIN2 = (float(np.sin(np.radians(4.0)) ** 2), float(np.sin(np.radians(8.0)) ** 2))
 
 
 # ----------------------------------------------------------------------------------------
@@ -107,7 +121,8 @@ def _basis(nx, ny, nz, T, j):
 
 @njit(cache=True)
 def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0, c1, lo, hi, lam, coef, T):
-    """Lagged terms of active pairs idx[lo:hi]: lam (na, 9), coef (na, 9, 4), T (na, 9, 3, 2)."""
+    """Lagged friction of active pairs idx[lo:hi]: net normal force lam (na,) (signed), closest-point
+    weights coef (na, 1, 4), tangents T (na, 1, 3, 2) of the contact normal."""
     P = np.empty((4, 3))
     gc = np.empty(12)
     Hc = np.empty((1, 1))
@@ -115,9 +130,13 @@ def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0,
         q = idx[r]
         _load_stencil(x, nodes, shift, q, P)
         d2e, es, et, ecase = _ee_classify(P)
-        w, w1, w2 = _blend(_sin2_angle(P, gc, Hc, 0), c0[q], c1[q])
+        s2 = _sin2_angle(P, gc, Hc, 0)
+        w, w1, w2 = _blend(s2, c0[q], c1[q])
+        net = 0.0
+        wsum = 0.0
+        cs = 0.0
+        ct = 0.0
         for j in range(9):
-            lam[r, j] = 0.0
             W, Wp = _term_weights(j, w, alpha[q], beta[q])
             if W == 0.0:
                 continue
@@ -126,17 +145,66 @@ def _pair_lag_chunk(x, nodes, shift, rsum, alpha, beta, idx, kind, kp, ghat, c0,
             if d - rsum[q] >= ghat or d <= 0.0:
                 continue
             e, e1, e2 = _phi(d - rsum[q], kind, kp, ghat)
-            lam[r, j] = -W * e1
-            coef[r, j, 0] = 1.0 - s
-            coef[r, j, 1] = s
-            coef[r, j, 2] = -(1.0 - t)
-            coef[r, j, 3] = -t
-            nx = ny = nz = 0.0
+            net -= W * e1
+            # the rubbing point: the terms' closest points weighted by their force magnitudes, a
+            # point on each segment that moves smoothly (the segments' own closest point jumps
+            # between their ends as they turn parallel)
+            a = abs(W * e1)
+            wsum += a
+            cs += a * s
+            ct += a * t
+        lam[r] = net
+        if wsum > 0.0:
+            es = cs / wsum
+            et = ct / wsum
+        coef[r, 0, 0] = 1.0 - es
+        coef[r, 0, 1] = es
+        coef[r, 0, 2] = -(1.0 - et)
+        coef[r, 0, 3] = -et
+        n = np.zeros(3)
+        for k in range(4):
+            for i in range(3):
+                n[i] += coef[r, 0, k] * P[k, i]
+        nn = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        if nn <= 0.0:       # the weighted points met (cores cannot): the segments' closest points
+            d2e, es, et, ecase = _ee_classify(P)
+            coef[r, 0, 0] = 1.0 - es
+            coef[r, 0, 1] = es
+            coef[r, 0, 2] = -(1.0 - et)
+            coef[r, 0, 3] = -et
+            n[:] = 0.0
             for k in range(4):
-                nx += coef[r, j, k] * P[k, 0]
-                ny += coef[r, j, k] * P[k, 1]
-                nz += coef[r, j, k] * P[k, 2]
-            _basis(nx / d, ny / d, nz / d, T[r], j)
+                for i in range(3):
+                    n[i] += coef[r, 0, k] * P[k, i]
+            nn = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        n /= nn
+        # the contact normal is normal to both yarns. Near parallel: the rubbing points' direction
+        # less its part along the yarns' mean tangent (a pair offset along the yarns would lean);
+        # crossing: the common perpendicular of the segments' lines, the smooth yarns' normal also
+        # for a pair beside the crossing; between them a blend v (the perpendicular turns with any
+        # skew as the yarns turn parallel)
+        ea = P[1] - P[0]
+        eb = P[3] - P[2]
+        tb = ea / np.sqrt(ea @ ea)
+        tc = eb / np.sqrt(eb @ eb)
+        if tb @ tc < 0.0:
+            tc = -tc
+        tm = tb + tc
+        tm /= np.sqrt(tm @ tm)
+        npar = n - (n @ tm) * tm
+        nn = np.sqrt(npar @ npar)
+        if nn > 1e-6:
+            n = npar / nn
+        v = 1.0 - _blend(s2, LINE_NORMAL_SIN2[0], LINE_NORMAL_SIN2[1])[0]
+        m = np.cross(ea, eb)
+        mm = np.sqrt(m @ m)
+        if v > 0.0 and mm > 0.0:
+            m /= mm
+            if m @ n < 0.0:
+                m = -m
+            m = v * m + (1.0 - v) * n
+            n = m / np.sqrt(m @ m)
+        _basis(n[0], n[1], n[2], T[r], 0)
 
 
 @njit(cache=True)
@@ -166,8 +234,8 @@ def _friction_chunk(x, x0, nodes, coef, T, lam, mu, dref, eps, hess, project, lo
             slip_out[r, j] = 0.0
             if lj == 0.0:
                 continue
-            # a negative (inclusion-exclusion) term cancels a positive one of a neighbouring pair
-            # at the same point; projecting, its Hessian is left out (each kept one is PSD)
+            # a negative normal force (only in a hand-built lag: the lag functions give none) makes a
+            # concave term; projecting, its Hessian is left out (each kept one is PSD)
             skip_h = project and lj < 0.0
             for i in range(3):
                 d[i] = -dref[r, i]
@@ -231,8 +299,8 @@ class FrictionLag:
     """Lagged friction contacts (frozen at x_lag).
 
     nodes (np, S) stencil nodes (S = 4 for pairs, 1 for plates); coef (np, J, S) closest-point
-    weights of each term; basis (np, J, 3, 2) tangents; lam (np, J) normal forces (N, signed:
-    pair terms carry the inclusion-exclusion weights); mu (np,) friction coefficients;
+    weights of each term (J = 1: one rubbing point per pair or plate node); basis (np, J, 3, 2)
+    tangents; lam (np, J) normal forces (N, >= 0 from the lag functions); mu (np,) friction coefficients;
     index (np,) the candidate each row comes from; plate (np,) plate of each row (-1 for pairs).
     """
 
@@ -304,24 +372,57 @@ def pair_friction_lag(x_lag, stencil: PairStencil, enforcement: Enforcement, mu=
     """Freeze the yarn-yarn friction contacts at positions x_lag (n, 3).
 
     ``mu``: scalar or (c,) per candidate (see :func:`friction_coefficients`). Rows: the pairs
-    active at x_lag with mu > 0.
+    active at x_lag with mu > 0, each rubbing once (module docstring): at its segments' closest
+    points, along the contact normal, with its share of its patch's net normal force.
     """
     x = _positions(x_lag, int(stencil.nodes.max()) + 1 if len(stencil) else None)
     mu_c = friction_coefficients(mu, n=len(stencil))
     from_gap = pair_gaps(x, stencil)
     idx = np.flatnonzero((from_gap < enforcement.cutoff) & (mu_c > 0)).astype(np.int64)
     na = len(idx)
-    lam = np.zeros((na, 9))
-    coef = np.zeros((na, 9, 4))
-    T = np.zeros((na, 9, 3, 2))
+    net = np.zeros(na)
+    coef = np.zeros((na, 1, 4))
+    T = np.zeros((na, 1, 3, 2))
     if na:
         if enforcement.kind in ("barrier", "shell") and from_gap[idx].min() <= 0:
             raise InputError("x_lag: a pair's gap is <= 0, where the barrier is infinite")
         c0, c1 = enforcement.pair_c_range(stencil)
         _pair_lag(x, stencil.nodes, stencil.shift, stencil.rsum, stencil.alpha, stencil.beta, idx,
-                  enforcement.code, enforcement.params, enforcement.cutoff, c0, c1, lam, coef, T)
+                  enforcement.code, enforcement.params, enforcement.cutoff, c0, c1, net, coef, T)
+    lam = patch_shares(net, stencil.nodes[idx], stencil.shift[idx])[:, None]
     return FrictionLag(nodes=stencil.nodes[idx], coef=coef, basis=T, lam=lam, mu=mu_c[idx], index=idx,
                        plate=np.full(na, -1, dtype=np.int64))
+
+
+def contact_patches(nodes, shift) -> np.ndarray:
+    """(np,) patch label of each pair: pairs that share a node of either yarn (at the same periodic
+    offset) touch the same contact patch. nodes (np, 4) stencil nodes (a0, a1, b0, b1); shift
+    (np, 4, 3) their periodic offsets (mm, :class:`~.stencil.PairStencil`)."""
+    n = len(nodes)
+    if not n:
+        return np.zeros(0, dtype=np.int64)
+    # offsets are sums of lattice vectors: rounding only merges what is equal up to round-off
+    rel = np.round(np.asarray(shift, dtype=float) - np.asarray(shift, dtype=float)[:, :1], 6)
+    keys = np.vstack([np.c_[nodes[:, i], nodes[:, j], rel[:, j] - rel[:, i]] for i in (0, 1) for j in (2, 3)])
+    _, key = np.unique(keys, axis=0, return_inverse=True)
+    rows = np.tile(np.arange(n), 4)
+    link = sp.csr_matrix((np.ones(4 * n), (rows, key.ravel())), shape=(n, int(key.max()) + 1))
+    return connected_components(link @ link.T, directed=False)[1]
+
+
+def patch_shares(net, nodes, shift) -> np.ndarray:
+    """Nonnegative normal forces (np,) N: each patch's net normal force shared among its pairs in
+    proportion to their positive nets (a pair whose inclusion-exclusion terms sum below zero corrects
+    its neighbours; on its own it would rub against the slip)."""
+    net = np.asarray(net, dtype=float)
+    if not len(net):
+        return net
+    lab = contact_patches(nodes, shift)
+    pos = np.clip(net, 0.0, None)
+    total = np.bincount(lab, weights=net)
+    total_pos = np.bincount(lab, weights=pos)
+    scale = np.where(total_pos > 0.0, np.clip(total, 0.0, None) / np.where(total_pos > 0.0, total_pos, 1.0), 0.0)
+    return pos * scale[lab]
 
 
 def plate_friction_lag(x_lag, nodes, radius, origin, normal, enforcement: Enforcement, plate=0,
@@ -350,8 +451,8 @@ def friction_potential(lag: FrictionLag, x, x_start, eps_v: float, plate_motion=
     """Lagged friction potential at x (n, 3) for the step from x_start (n, 3).
 
     eps_v : slip (mm, > 0) at which friction saturates. plate_motion : (P, 3) displacement of
-    each plate over the step (mm; plate rows). project : PSD-project pair blocks whose terms
-    include negative weights.
+    each plate over the step (mm; plate rows). project : leave terms with a negative normal force
+    (a hand-built lag) out of the Hessian.
     """
     x = _positions(x)
     x0 = _positions(x_start)

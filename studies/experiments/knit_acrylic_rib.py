@@ -2,12 +2,11 @@
 (issue 23): how much softer the rib is across than along, and where it stiffens along the wales.
 
 ``cells/rib_1x1_acrylic.toml`` (worsted-weight acrylic, Singal et al. 2024: 2.66 mm, B = 0.045
-N mm^2, a compressible shell fitted to their plate test, loop length 16.1 mm) is relaxed once with
-``homtex.relax`` (take-down 0.06 N per 5 needles) and pulled with ``homtex.tensile(...,
-specimen="cell")`` (the periodic cell, free lateral contraction) along the wales and along the
-courses to 50 % in 2 % levels. Frictionless: at the cell file's friction 0.3 a tensile level does not
-converge in reasonable time (docs/knits.md, limits), so both directions are run without friction,
-the same for both, which is what the comparison needs.
+N mm^2, a compressible shell fitted to their plate test, loop length 16.1 mm, yarn-yarn friction 0.3)
+is relaxed once with ``homtex.relax`` (take-down 0.06 N per 5 needles) and pulled with
+``homtex.tensile(..., specimen="cell")`` (the periodic cell, free lateral contraction) along the
+wales and along the courses to 50 % in 2 % levels, both with the cell file's friction (``--friction``
+another coefficient, 0 for the frictionless comparison).
 
 Recorded: force per width (N/mm, over the width across the test direction at the start), the width,
 the energy split and balance, the Newton iterations and process CPU seconds; the ratio wale / course
@@ -16,7 +15,7 @@ exceeds ``STIFFEN`` times its mean slope over the first 20 %).
 
 Usage::
 
-    python studies/experiments/knit_acrylic_rib.py [--quick] [--out DIR] [--no-docs]
+    python studies/experiments/knit_acrylic_rib.py [--quick] [--out DIR] [--no-docs] [--friction MU]
 
 Writes ``knit_acrylic_rib.nc`` (dims ``direction``, ``strain``) and ``knit_acrylic_rib.png`` into OUT
 (default results/knit_acrylic_rib) and copies the chart to docs/studies/ (not with --quick). Full
@@ -55,7 +54,7 @@ def stiffening_strain(strain: np.ndarray, f: np.ndarray, base: float = 0.2) -> f
     return float(strain[hit[0]]) if hit.size else float("nan")
 
 
-def summarise(tests: dict, relaxed_attrs: dict, relax_cpu: float) -> xr.Dataset:
+def summarise(tests: dict, relaxed_attrs: dict, relax_cpu: float, mu: float) -> xr.Dataset:
     """One Dataset over ``direction`` from {direction: (tensile Dataset, CPU seconds)}: the curves,
     the wale / course ratio at 20 % and where the wales stiffen in its attrs."""
     runs = []
@@ -75,11 +74,11 @@ def summarise(tests: dict, relaxed_attrs: dict, relax_cpu: float) -> xr.Dataset:
                   / fw.sel(direction="course").sel(strain=s20, method="nearest"))
     w = res.sel(direction="wale")
     st = stiffening_strain(w.strain.values, w.force_per_width.values)
-    res.attrs.update(title="acrylic 1x1 rib along the wales and the courses (periodic cell, frictionless)",
+    res.attrs.update(title=f"acrylic 1x1 rib along the wales and the courses (periodic cell, friction {mu:g})",
                      ratio_strain=s20, wale_over_course_at_20=ratio, wale_stiffening_strain=st,
                      stiffening_rule=f"secant slope over a level above {STIFFEN:g} x the mean slope to 20 %",
                      relax_cpu_s=relax_cpu, relaxed_wale_spacing_mm=relaxed_attrs["wale_spacing_mm"],
-                     relaxed_course_spacing_mm=relaxed_attrs["course_spacing_mm"], friction=0.0)
+                     relaxed_course_spacing_mm=relaxed_attrs["course_spacing_mm"], friction=mu)
     return res
 
 
@@ -106,29 +105,34 @@ def chart(ds: xr.Dataset, path):
         a.set_ylabel("force per width, N/mm")
         a.grid(alpha=0.3, which="both")
         a.legend(fontsize=8)
-        a.set_title(f"acrylic 1x1 rib, periodic cell, frictionless ({scale} scale)", fontsize=10)
+        mu = float(ds.attrs["friction"])
+        a.set_title(f"acrylic 1x1 rib, periodic cell, {'frictionless' if mu == 0 else f'friction {mu:g}'} "
+                    f"({scale} scale)", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
 
 
 def main(argv=None):
-    args = add_docs_option(parser(__file__, __doc__)).parse_args(argv)
+    p = add_docs_option(parser(__file__, __doc__))
+    p.add_argument("--friction", type=float, default=None, help="yarn-yarn friction (default: the cell file's, 0.3)")
+    args = p.parse_args(argv)
     out = setup(args)
     cell = homtex.load_cell("rib_1x1_acrylic")
     strain, steps = (0.04, 2) if args.quick else (0.5, 25)
     if args.quick:                      # coarse elements: the suite runs the quick mode
         cell = cell.replace(**{"resolution.element_length": 2.0})
     t0 = time.process_time()
-    relaxed = homtex.relax(cell, friction=0.0)
+    mu = float(cell.contact.get("friction", 0.0)) if args.friction is None else args.friction
+    relaxed = homtex.relax(cell, friction=mu)
     relax_cpu = time.process_time() - t0
     tests = {}
     for d in DIRECTIONS:
         t1 = time.process_time()
-        ds = homtex.tensile(relaxed, strain=strain, direction=d, steps=steps, friction=0.0)
+        ds = homtex.tensile(relaxed, strain=strain, direction=d, steps=steps, friction=mu)
         tests[d] = (ds, time.process_time() - t1)
         log.info("%s: %s, %.0f s CPU; force per width %s N/mm", d, ds.attrs["status"], tests[d][1],
                  np.array2string(ds.force_per_width.values, precision=4))
-    res = summarise(tests, relaxed.attrs, relax_cpu)
+    res = summarise(tests, relaxed.attrs, relax_cpu, mu)
     s20, ratio, st = res.attrs["ratio_strain"], res.attrs["wale_over_course_at_20"], res.attrs["wale_stiffening_strain"]
     save_netcdf(res, out / "knit_acrylic_rib.nc")
     path = chart(res, out / "knit_acrylic_rib.png")
