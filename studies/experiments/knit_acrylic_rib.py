@@ -61,7 +61,7 @@ def summarise(tests: dict, relaxed_attrs: dict, relax_cpu: float, mu: float) -> 
     for d in DIRECTIONS:
         ds, cpu = tests[d]
         keep = ds[["force_per_width", "force", "width", "extension", "axial", "torsion", "bending_y", "bending_z",
-                   "shear", "contact_energy", "energy_balance", "newton_iterations"]]
+                   "shear", "contact_energy", "friction_energy", "external_work", "energy_balance", "newton_iterations"]]
         keep["status"] = ((), str(ds.attrs["status"]))
         keep["cpu_s"] = ((), cpu, {"units": "s", "long_name": "process CPU time of the tensile test"})
         keep["gauge_length"] = ((), float(ds.attrs["gauge_length_mm"]), {"units": "mm", "long_name": "gauge length"})
