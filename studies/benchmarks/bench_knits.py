@@ -10,8 +10,8 @@ iteration, and the cell's element count):
 2. ``homtex.tensile`` of the relaxed E-glass rib along the wales to 45 % in 45 levels, frictionless
    (the paper's model);
 3. ``homtex.tensile`` of the relaxed acrylic rib along the wales to 50 % in 25 levels, frictionless
-   (target: within 10 minutes; the timing kept comparable with earlier runs; with the cell file's
-   friction 0.3 see studies/experiments/knit_acrylic_rib.py).
+   (target: within 10 minutes; with the cell file's friction 0.3 the curve depends on the load
+   stepping, see docs/knits.md).
 
 Usage::
 
