@@ -6,12 +6,15 @@ import numpy as np
 import pytest
 
 from homtex.contact.ccd import plate_step_bound
+from homtex.contact.examples import thick_crossing
 from homtex.contact.friction import (
     _mollifier,
+    contact_patches,
     friction_coefficients,
     friction_mollifier,
     friction_potential,
     pair_friction_lag,
+    patch_shares,
     plate_friction_lag,
 )
 from homtex.contact.plates import plate_potential
@@ -92,8 +95,6 @@ def test_near_a_node_the_pair_rubs_with_the_potentials_net_normal_force(rng):
 def test_a_patch_shares_its_net_normal_force_among_its_pressing_pairs():
     """Pairs that share a node of either yarn form a patch; a pair whose net is negative corrects its
     neighbours, never rubs the wrong way; separate patches and periodic images stay apart."""
-    from homtex.contact.friction import contact_patches, patch_shares
-
     nodes = np.array([[0, 1, 10, 11], [1, 2, 10, 11], [2, 3, 11, 12], [20, 21, 30, 31], [20, 21, 30, 31]])
     shift = np.zeros((5, 4, 3))
     shift[4, 2:] = [5.0, 0, 0]                       # the same nodes of b, one period over
@@ -174,20 +175,6 @@ def test_pair_sliding_force_is_mu_lambda():
     assert np.allclose(Fb, [-0.4 * lam, 0, 0], rtol=1e-6, atol=1e-12)
     assert np.allclose(-ev.grad[:2].sum(axis=0), -Fb)
     assert ev.dissipation == pytest.approx(0.4 * lam * 0.02, rel=1e-6)
-
-
-def thick_crossing(depth, angle, n=20, h=0.1, core=0.05, outer=0.5):
-    """Two straight yarns of n elements of length h (mm) crossing at ``angle`` degrees, hard cores of
-    radius ``core`` under compressible shells to radius ``outer``, pressed ``depth`` into each other:
-    a contact spread over many elements, as a thick knitting yarn's."""
-    s = (np.arange(n + 1) - n / 2) * h
-    th = np.radians(angle)
-    x = np.vstack([np.c_[s, 0 * s, 0 * s], np.c_[s * np.cos(th), s * np.sin(th), np.full_like(s, 2 * outer - depth)]])
-    chain = np.c_[np.arange(n), np.arange(1, n + 1)]
-    A, B = np.meshgrid(np.arange(n), np.arange(n) + n, indexing="ij")
-    st = pair_stencil(np.vstack([chain, chain + n + 1]), np.full(2 * n, core), A.ravel(), B.ravel())
-    enf = Enforcement("shell", ghat=1e-3, shell=2 * (outer - core), shell_stiffness=2.0, shell_exponent=3.0)
-    return x, st, enf
 
 
 @pytest.mark.parametrize("depth, angle", [(0.05, 90.0), (0.6, 90.0), (0.3, 30.0), (0.6, 12.0), (0.6, 5.0), (0.6, 1.0)])

@@ -10,6 +10,7 @@ import pytest
 from test_contact_nonlinear import crossing_yarns, stitch_over_a_yarn
 
 import homtex
+from homtex.analysis.energy import ledger_check
 from homtex.errors import InputError, SolverError
 
 
@@ -208,8 +209,6 @@ def test_a_perfect_column_pressed_between_plates_buckles_onto_the_elastica():
 def test_friction_that_gives_energy_back_is_named_with_its_cause():
     """Coulomb friction only dissipates: a ledger whose friction energy falls below zero (beyond 1 %
     of the driven work) is flagged with the cause, a round-off dip is not."""
-    from homtex.analysis.energy import ledger_check
-
     W, lv, zero = np.array([0.0, 1.0, 2.0, 3.0]), np.array([0.0, 1 / 3, 2 / 3, 1.0]), np.zeros(4)
     assert ledger_check(W, zero, zero, zero, lv, friction_energy=[0.0, 0.4, 0.8, 1.2]) == ""
     assert ledger_check(W, zero, zero, zero, lv, friction_energy=[0.0, -0.005, -0.01, -0.02]) == ""

@@ -39,9 +39,9 @@ from numba import njit
 import homtex
 from homtex.contact import incremental, ipc_scene
 from homtex.contact.distance import _d2_at, _ee_classify, _sin2_angle
+from homtex.contact.examples import thick_crossing
 from homtex.contact.friction import FrictionLag, _basis, friction_mollifier, friction_potential, pair_friction_lag
 from homtex.contact.potential import (
-    Enforcement,
     _blend,
     _load_stencil,
     _phi,
@@ -50,7 +50,6 @@ from homtex.contact.potential import (
     pair_gaps,
     pair_potential,
 )
-from homtex.contact.stencil import pair_stencil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import add_docs_option, parser, publish, pyplot, save_figure, save_netcdf, setup  # noqa: E402
@@ -103,17 +102,6 @@ def per_term(x, stencil, enforcement, mu=0.0) -> FrictionLag:
                enforcement.params, enforcement.cutoff, c0, c1, lam, coef, T)
     return FrictionLag(nodes=stencil.nodes[idx], coef=coef, basis=T, lam=lam, mu=np.ascontiguousarray(mu_c[idx]),
                        index=idx, plate=np.full(na, -1, dtype=np.int64))
-
-
-def thick_crossing(depth: float, angle: float, n: int = 20, h: float = 0.1, core: float = 0.05, outer: float = 0.5):
-    s = (np.arange(n + 1) - n / 2) * h
-    th = np.radians(angle)
-    x = np.vstack([np.c_[s, 0 * s, 0 * s], np.c_[s * np.cos(th), s * np.sin(th), np.full_like(s, 2 * outer - depth)]])
-    chain = np.c_[np.arange(n), np.arange(1, n + 1)]
-    A, B = np.meshgrid(np.arange(n), np.arange(n) + n, indexing="ij")
-    st = pair_stencil(np.vstack([chain, chain + n + 1]), np.full(2 * n, core), A.ravel(), B.ravel())
-    enf = Enforcement("shell", ghat=1e-3, shell=2 * (outer - core), shell_stiffness=2.0, shell_exponent=3.0)
-    return x, st, enf
 
 
 def rigid_slides(depths=(0.05, 0.3, 0.6), angles=(90.0, 30.0, 5.0), slide=0.05) -> xr.Dataset:
