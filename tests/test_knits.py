@@ -282,14 +282,19 @@ def test_the_m_over_l_cubed_law_holds_exactly_for_a_similar_cell(jersey):
     assert e1 == pytest.approx(e0 * a / b, rel=1e-8)
 
 
-def test_friction_between_compressible_yarns_is_flagged_as_step_dependent():
-    """With friction, a thick compressible yarn's curve depends on how finely the engine subdivides
-    its levels (measured on the acrylic rib, docs/knits.md): such a test is never reported plainly
-    ok; frictionless it is not flagged for that."""
+def test_friction_between_compressible_yarns_does_not_depend_on_the_sub_steps(monkeypatch):
+    """With friction, a thick compressible yarn's curve is the same however finely the engine
+    subdivides its levels (the regularisation slip halves with the step; at a fixed slip the acrylic
+    rib across read 0.024 / 0.010 / 0.0056 N/mm at 2 % with 5 / 8 / 10 halvings, docs/knits.md)."""
+    from homtex.contact import engine
     cell = homtex.load_cell("cells/rib_1x1_acrylic.toml").replace(**{"resolution.element_length": 2.0})
     relaxed = homtex.relax(cell, friction=0.0)
-    rough = homtex.tensile(relaxed, strain=0.01, direction="wale", steps=1, friction=0.3)
+    runs = []
+    for halvings in (7, 10):
+        monkeypatch.setitem(engine.FRICTION_STEPPING, "max_refine", halvings)
+        runs.append(homtex.tensile(relaxed, strain=0.01, direction="wale", steps=1, friction=0.3))
     smooth = homtex.tensile(relaxed, strain=0.01, direction="wale", steps=1, friction=0.0)
-    assert rough.attrs["status"] == "flagged" and "not step-converged" in rough.attrs["status_detail"]
-    assert "not step-converged" not in smooth.attrs.get("status_detail", "")
-    assert float(rough.friction_energy[-1]) > 0          # and it dissipates
+    assert [ds.attrs["status"] for ds in runs] == ["ok", "ok"]
+    assert float(runs[1].force[-1]) == pytest.approx(float(runs[0].force[-1]), rel=1e-3)
+    assert float(runs[0].friction_energy[-1]) > 0                       # it dissipates
+    assert float(runs[0].force[-1]) > 1.05 * float(smooth.force[-1])   # and friction stiffens

@@ -127,13 +127,6 @@ def _positions(ds, pos, ee, periods=None) -> None:
     ds.coords["mechanism"] = ("mechanism", np.array(ENERGY_KEYS), {"units": "1", "long_name": "energy term"})
 
 
-#: why a tensile test with friction between compressible (thick) yarns is flagged (docs/knits.md)
-STEP_DEPENDENT = ("friction between compressible yarns: the curve depends on the load stepping (the acrylic rib pulled "
-                  "across read 0.024 / 0.010 / 0.0056 N/mm at 2 % as the engine halved its first level up to 5 / 8 / "
-                  "10 times, the sub-steps' slip nearing the friction's regularisation slip); not step-converged, "
-                  "docs/knits.md")
-
-
 def finish(ds, rec, status, detail, sol, info):
     """Status, the energy checks, the failure-stress strain and the peak's place; returns ds."""
     if status is Status.OK:
@@ -143,11 +136,6 @@ def finish(ds, rec, status, detail, sol, info):
         if check:
             status, detail = Status.FLAGGED, check
             log.warning("tensile: %s", check)
-    if status is Status.OK and float(ds.attrs.get("friction", 0.0)) > 0 and info.get("compression") is not None:
-        # measured, not cured: the lagged friction's regularisation (a slip per step) makes such a
-        # path depend on how finely the engine subdivides its levels
-        status, detail = Status.FLAGGED, STEP_DEPENDENT
-        log.warning("tensile: %s", detail)
     set_status(ds, status, detail)
     beyond = np.flatnonzero(ds.beyond_failure_stress.values)
     ds.attrs["first_failure_strain"] = float(ds.strain[beyond[0]]) if len(beyond) else float("nan")

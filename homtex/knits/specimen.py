@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from ..contact.engine import PATH_STEPPING, EngineStepper
+from ..contact.engine import FRICTION_STEPPING, PATH_STEPPING, EngineStepper
 from ..contact.incremental import IncrementalSolver
 from ..contact.ipc_system import serial_numba
 from ..contact.options import Contact
@@ -148,7 +148,7 @@ def specimen_test(relaxed, info, wales, courses, strain, v, steps, mu, progress,
     sol.delta = sol.s.delta0
     sol._start_ledger()
     stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam), max_cuts=10, refine=0.003,
-                            **PATH_STEPPING)
+                            **(FRICTION_STEPPING if sol.scene.has_friction else PATH_STEPPING))
     rec = _Recorder(sol, {**info, "course": np.zeros(spec.n_elements, int), "filament": np.zeros(spec.n_elements, int)},
                     info["yarn_model"].get("failure_stress"))
     mid = np.flatnonzero(np.abs(spec.nodes[:, 1] - 0.5 * (spec.nodes[top, 1].mean() + spec.nodes[bottom, 1].mean()))

@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from ..contact.engine import PATH_STEPPING, EngineStepper
+from ..contact.engine import FRICTION_STEPPING, PATH_STEPPING, EngineStepper
 from ..contact.incremental import IncrementalSolver
 from ..contact.ipc_system import serial_numba
 from ..contact.lattice import Lattice
@@ -109,7 +109,7 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
     lat = Lattice(free=tuple(free), motion={(v, v): strain * L0})
     sol = continue_from(relaxed, info, {0: [0, 1, 2]}, contact, lat, tol, state=state)
     stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam, loads=1.0), max_cuts=10, refine=0.003,
-                            **PATH_STEPPING)
+                            **(FRICTION_STEPPING if sol.scene.has_friction else PATH_STEPPING))
     rec = _Recorder(sol, info, info["yarn_model"].get("failure_stress"))
     pos, ee, per = [], [], []
     rec.add(0.0, float(sol._react[sol.lat.rows[v], v]), width0, 0.0, width0, 0)
