@@ -51,11 +51,12 @@ _LEDGER = ("external_work", "prestrain_work", "strain_energy", "contact_energy",
 # snaps localised to 5 halvings, each step started at the last sub-step size that passed; measured
 # there to give the full bisection's curves (tests/test_knits.py) at a fraction of its cost
 PATH_STEPPING = {"max_refine": 5, "memory": True}
-# with friction, two halvings more: where contacts start to slide from rest (a tensile test's first
-# level) the external work's trapezoid misses about half the first sub-step's friction work, and
-# each halving halves it (the acrylic rib across, first 2 % level: balance -1.21 / -0.61 / -0.18 %
-# with 5 / 6 / 8 halvings, the forces the same to 4 digits)
-FRICTION_STEPPING = {**PATH_STEPPING, "max_refine": 7}
+# knit tensile tests with friction: the regularisation slip halved with the step (see EngineStepper),
+# and two halvings more: where contacts start to slide from rest (a tensile test's first level) the
+# external work's trapezoid misses about half the first sub-step's friction work, and each halving
+# halves it (the acrylic rib across, first 2 % level: balance -1.21 / -0.61 / -0.18 % with 5 / 6 / 8
+# halvings, the forces the same to 4 digits)
+FRICTION_STEPPING = {**PATH_STEPPING, "max_refine": 7, "slip_per_step": True}
 
 
 class EngineStepper:
@@ -76,6 +77,12 @@ class EngineStepper:
     memory : start a step at the sub-step size that last passed, doubled (not at the whole step):
         on a path whose hard stretch spans several levels, each level's doomed coarse tries (solved
         to equilibrium, then rolled back) are skipped. The levels are on the same halving grid.
+    slip_per_step : halve the friction's regularisation slip with every halving of a step (a slip
+        rate, as IPC's eps_v dt): the path no longer depends on the subdivision where sub-steps
+        slide contacts by about the slip (thick compressible yarns: the acrylic rib across at 2 %
+        read 0.024 / 0.010 / 0.0056 N/mm with 5 / 8 / 10 halvings at a fixed slip, 0.0294 with
+        each). Off by default: on the spacer's thin yarns it moves the seamed press by 0.1 % and
+        makes it 2x slower (docs/contact.md).
 
     A step that stalls on buckling beams, or converges to a state with a negative eigenvalue (a
     perfect structure past its bifurcation), is left along the critical mode by half the
@@ -85,11 +92,12 @@ class EngineStepper:
 
     def __init__(self, sol: IncrementalSolver, solve: Callable[[float], StepInfo], *, max_cuts: int = 4,
                  refine: float = 0.01, on_accept: Callable[[StepInfo], object] | None = None, start: float = 0.0,
-                 max_refine: int | None = None, memory: bool = False):
+                 max_refine: int | None = None, memory: bool = False, slip_per_step: bool = False):
         self.sol, self._solve = sol, solve
         self.max_cuts, self.refine = int(max_cuts), float(refine)
         self.max_refine = self.max_cuts if max_refine is None else min(int(max_refine), self.max_cuts)
         self.memory = bool(memory)
+        self.slip_per_step = bool(slip_per_step)
         self.hint = 0                    # depth the next try starts at (memory)
         self.on_accept = on_accept
         self.level = float(start)
@@ -206,12 +214,9 @@ class EngineStepper:
             self.accepted.append(self.on_accept(info))
 
     def _halves(self, level: float, depth: int) -> StepInfo:
-        # the friction's regularisation slip is a slip per step (a rate, as IPC's eps_v dt): halved
-        # with the step, else sub-steps that slide less than it lose friction and the path depends
-        # on the subdivision (the acrylic rib across at 2 %: 0.024 / 0.010 / 0.0056 N/mm with 5 / 8 /
-        # 10 halvings at a fixed slip, 0.0294 with each; docs/knits.md)
         eps = self.sol.eps_v
-        self.sol.eps_v = 0.5 * eps
+        if self.slip_per_step:
+            self.sol.eps_v = 0.5 * eps
         try:
             mid = 0.5 * (self.level + level)
             self.advance(mid, depth + 1)
