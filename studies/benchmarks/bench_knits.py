@@ -7,11 +7,10 @@ iteration, and the cell's element count):
 1. ``homtex.relax`` of ``jersey_eglass``, ``rib_1x1_eglass``, ``milano_eglass``, ``jersey_acrylic``,
    ``rib_1x1_acrylic`` (take-down 0.06 N per 5 needles; target: the relaxed acrylic rib and the
    equivalent-yarn E-glass rib within 60 s each);
-2. ``homtex.tensile`` of the relaxed E-glass rib along the wales to 45 % in 45 levels, frictionless
-   (the paper's model);
-3. ``homtex.tensile`` of the relaxed acrylic rib along the wales to 50 % in 25 levels, frictionless
-   (target: within 10 minutes; with the cell file's friction 0.3 the curve depends on the load
-   stepping, see docs/knits.md).
+2. ``homtex.tensile`` of the relaxed E-glass rib along the wales to 45 % in 45 levels, with the cell
+   file's friction (0: the paper's frictionless filaments);
+3. ``homtex.tensile`` of the relaxed acrylic rib along the wales to 50 % in 25 levels, with the cell
+   file's friction 0.3 (target: within 10 minutes).
 
 Usage::
 
@@ -111,7 +110,7 @@ def main(argv=None):
         row(f"relax {name}", cell, wall, cpu, int(r.attrs["newton_iterations"]), str(r.attrs["status"]))
     for name, strain, steps in tensile_cases:
         r = relaxed[name]
-        ds, wall, cpu = _timed(homtex.tensile, r, strain=strain, direction="wale", steps=steps, friction=0.0)
+        ds, wall, cpu = _timed(homtex.tensile, r, strain=strain, direction="wale", steps=steps)
         row(f"tensile {name}", r.cell, wall, cpu, int(ds.newton_iterations.sum()), str(ds.attrs["status"]))
     res = xr.Dataset(
         {k: ("case", np.array([r[k] for r in rows]), {"units": u, "long_name": k.replace("_", " ")})

@@ -5,8 +5,8 @@
 N mm^2, a compressible shell fitted to their plate test, loop length 16.1 mm, yarn-yarn friction 0.3)
 is relaxed once with ``homtex.relax`` (take-down 0.06 N per 5 needles) and pulled with
 ``homtex.tensile(..., specimen="cell")`` (the periodic cell, free lateral contraction) along the
-wales and along the courses to 50 % in 2 % levels, frictionless (``--friction 0.3``: the cell file's
-friction, whose curves depend on the load stepping and are flagged, docs/knits.md).
+wales and along the courses to 50 % in 2 % levels, with the cell file's friction (``--friction 0``:
+frictionless, for comparison; docs/knits.md).
 
 Recorded: force per width (N/mm, over the width across the test direction at the start), the width,
 the energy split and balance, the Newton iterations and process CPU seconds; the ratio wale / course
@@ -33,6 +33,7 @@ import numpy as np
 import xarray as xr
 
 import homtex
+from homtex.knits.relax import cell_friction
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import add_docs_option, parser, publish, pyplot, save_figure, save_netcdf, setup  # noqa: E402
@@ -114,8 +115,8 @@ def chart(ds: xr.Dataset, path):
 
 def main(argv=None):
     p = add_docs_option(parser(__file__, __doc__))
-    p.add_argument("--friction", type=float, default=0.0,
-                   help="yarn-yarn friction (default 0; the cell file's 0.3 gives step-dependent, flagged curves)")
+    p.add_argument("--friction", type=float, default=None,
+                   help="yarn-yarn friction (default the cell file's, 0.3)")
     args = p.parse_args(argv)
     out = setup(args)
     cell = homtex.load_cell("rib_1x1_acrylic")
@@ -123,7 +124,7 @@ def main(argv=None):
     if args.quick:                      # coarse elements: the suite runs the quick mode
         cell = cell.replace(**{"resolution.element_length": 2.0})
     t0 = time.process_time()
-    mu = float(args.friction)
+    mu = cell_friction(cell, args.friction)
     relaxed = homtex.relax(cell, friction=mu)
     relax_cpu = time.process_time() - t0
     tests = {}
