@@ -9,6 +9,7 @@ import pytest
 
 import homtex
 from homtex.cells import Cell
+from homtex.contact.engine import EngineStepper
 from homtex.contact.incremental import IncrementalSolver
 from homtex.errors import CellError, InputError, SolverError
 
@@ -108,7 +109,6 @@ def test_a_drag_rubs_at_mu_N_however_finely_the_engine_subdivides_it(halvings):
     the engine halves 8 times (256 sub-steps of 2e-4 mm, below the 1e-3 mm slip set for the level)
     still slides at mu N and dissipates mu N x slip; at a fixed slip those sub-steps mobilise a third
     of mu N (the acrylic rib's friction fading as its steps were refined, docs/knits.md)."""
-    from homtex.contact.engine import EngineStepper
     mu, N, pull = 0.3, 1.0, 0.05
     sol, _ = yarn_on_plate(mu, N, eps=1e-3, pull=pull)
     sol.solve(motion=0.05)                  # friction built up over a first short step (trapezoidal work)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import homtex
+from homtex.contact import engine
 from homtex.errors import CellError
 from homtex.geometry.weft_knit import CRANE, course_curve, knit_geometry, parse_notation, stitch_length
 from homtex.knits.scaling import scaled_cell, xcf
@@ -219,8 +220,6 @@ def test_localising_snaps_less_finely_and_stepping_from_memory_leave_the_curve_u
     start a step at the last size that passed (EngineStepper's max_refine and memory): the
     equilibria at the reported levels are those of the full bisection (max_refine = max_cuts = 10,
     every level tried whole first), whose extra tries were all rolled back."""
-    from homtex.contact import engine
-
     init = engine.EngineStepper.__init__
 
     def full_bisection(self, *a, **k):
@@ -286,7 +285,6 @@ def test_friction_between_compressible_yarns_does_not_depend_on_the_sub_steps(mo
     """With friction, a thick compressible yarn's curve is the same however finely the engine
     subdivides its levels (the regularisation slip halves with the step; at a fixed slip the acrylic
     rib across read 0.024 / 0.010 / 0.0056 N/mm at 2 % with 5 / 8 / 10 halvings, docs/knits.md)."""
-    from homtex.contact import engine
     cell = homtex.load_cell("cells/rib_1x1_acrylic.toml").replace(**{"resolution.element_length": 2.0})
     relaxed = homtex.relax(cell, friction=0.0)
     runs = []
