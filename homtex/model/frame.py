@@ -173,10 +173,11 @@ class Frame:
         # an axial pre-strain of 1 would shrink the element to nothing
         self.prestrain = per_element(0.0 if prestrain is None else prestrain, m, "prestrain", lo=-1.0, hi=1.0,
                                      yarn=y)
+        # bounded below too: a subnormal factor (5e-324) underflows the rigidity to zero
         self.bending_factor = per_element(1.0 if bending_factor is None else bending_factor, m, "bending_factor",
-                                          positive=True, limit=MAX_FACTOR, yarn=y)
+                                          positive=True, lo=1.0 / MAX_FACTOR, limit=MAX_FACTOR, yarn=y)
         self.torsion_factor = per_element(1.0 if torsion_factor is None else torsion_factor, m, "torsion_factor",
-                                          positive=True, limit=MAX_FACTOR, yarn=y)
+                                          positive=True, lo=1.0 / MAX_FACTOR, limit=MAX_FACTOR, yarn=y)
 
     def _local_frames(self, ref, m):
         d = self.element_vectors
