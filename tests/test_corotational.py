@@ -327,3 +327,40 @@ def test_controls_need_what_they_drive():
         solve_nonlinear(fr, {0: "all"}, {3: (0, np.inf, 0, 0, 0, 0)})
     with pytest.raises(SolverError, match="held by nothing"):
         solve_nonlinear(fr, None, {3: (0, 1, 0, 0, 0, 0)})
+
+
+def test_threaded_element_loops_give_the_plain_loop_bitwise_and_follow_the_threads_option():
+    """The prange element kernels on one thread and on all give the plain loop's forces, tangents
+    and energies to the last bit on a deformed frame (each element is computed alone, each node
+    gathers its ends in a fixed order), so choosing them by speed changes no answer; the engine's
+    rule: one thread below PARALLEL_ELEMENTS."""
+    import numba
+
+    from homtex.analysis import corotational as C
+    from homtex.fem import corotational as K
+
+    n = 300
+    s = np.arange(n + 1) * 0.25
+    fr = homtex.Frame(np.c_[s, 0.3 * np.sin(s), 0.2 * np.cos(0.7 * s)], np.c_[np.arange(n), np.arange(1, n + 1)],
+                      radius=0.1, E=E, nu=NU)
+    cor = Corotational(fr, geometric="consistent")
+    rng = np.random.default_rng(3)
+    cor.ut[...] = rng.normal(scale=0.05, size=cor.ut.shape)
+    cor.Q[...] = np.array([expmap(w) for w in rng.normal(scale=0.1, size=(fr.n_nodes, 3))])
+    cor.Ke = np.zeros((fr.n_elements, 12, 12))
+    args = (np.ascontiguousarray(cor.positions), cor.Q, fr.elements, cor.shift, cor.E0, cor.L0, *cor.arrays,
+            cor._prestrain(1.0))
+    out = []
+    threads = numba.get_num_threads()
+    for fn, nt in ((K.corotational_tangent_serial, threads), (K.corotational_tangent, 1),
+                   (K.corotational_tangent, threads)):
+        numba.set_num_threads(nt)
+        try:
+            fn(*args, cor.fe, cor.Ke, cor.Rr, cor.lcur, cor.theta, cor.forces, cor.energy)
+        finally:
+            numba.set_num_threads(threads)
+        out.append((cor.fe.copy(), cor.Ke.copy(), cor.energy.copy()))
+    assert np.abs(out[0][1]).max() > 0 and np.abs(out[0][0]).max() > 0
+    for fe, Ke, en in out[1:]:
+        assert np.array_equal(fe, out[0][0]) and np.array_equal(Ke, out[0][1]) and np.array_equal(en, out[0][2])
+    assert C.element_loop_serial(C.PARALLEL_ELEMENTS - 1) and not C.element_loop_serial(C.PARALLEL_ELEMENTS)

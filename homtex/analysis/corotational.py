@@ -36,9 +36,28 @@ from ..model.rest import RestState, start_rest
 #: definite, for contact), "none" (linear element in the current frame)
 GEOMETRIC = ("tension", "full", "none", "consistent")
 
-#: elements from which the element loop runs on all threads (below it one thread is faster:
-#: measured 8 ms thread start-up per call on the shared 2-core machine for 32 elements)
+#: elements from which the element loop runs on all threads by default (below it one thread is
+#: faster on a shared machine: measured 8 ms thread start-up per call on the 2-core machine for 32
+#: elements when another process held the second core)
 PARALLEL_ELEMENTS = 4000
+
+
+def element_loop_serial(n_elements: int) -> bool:
+    """Whether a frame of ``n_elements`` runs its element loops (and the engine its contact
+    search) on one thread: below :data:`PARALLEL_ELEMENTS`. The option ``threads`` does not lower
+    it: with ``threads=2`` (numba and BLAS) the 43 mm seam cell (2416 elements) pressed to 70 % on
+    the idle 2-core machine took 870 s against 555 s with both on one thread, although its element
+    loops alone ran 2.1x faster on two (``studies/benchmarks/bench_element_threads.py``; docs/performance.md)."""
+    return int(n_elements) < PARALLEL_ELEMENTS
+
+
+def _threaded_kernels(n_elements: int) -> bool:
+    """The prange element kernels: where the loop is threaded, and on one numba thread (there they
+    are 3-35 % faster than the plain loop, bitwise the same results; a threaded small frame keeps
+    the plain loop, which waits for no partner thread on a busy machine)."""
+    import numba
+
+    return not element_loop_serial(n_elements) or numba.get_num_threads() == 1
 
 
 class Corotational:
@@ -132,7 +151,7 @@ class Corotational:
     def evaluate(self, prestrain_scale: float = 1.0) -> np.ndarray:
         """Internal force vector (n, 6) at the current state (N, N mm); the residual is f_ext - fint."""
         f = self.frame
-        big = f.n_elements >= PARALLEL_ELEMENTS
+        big = _threaded_kernels(f.n_elements)
         kernel = corotational_response if big else corotational_response_serial
         kernel(np.ascontiguousarray(self.positions), self.Q, f.elements, self.shift, self.E0, self.L0,
                *self.arrays, self._prestrain(prestrain_scale), self.fe, self.Rr, self.lcur,
@@ -147,7 +166,7 @@ class Corotational:
         f = self.frame
         if self.Ke is None:
             self.Ke = np.zeros((f.n_elements, 12, 12))
-        big = f.n_elements >= PARALLEL_ELEMENTS
+        big = _threaded_kernels(f.n_elements)
         kernel = corotational_tangent if big else corotational_tangent_serial
         kernel(np.ascontiguousarray(self.positions), self.Q, f.elements, self.shift, self.E0, self.L0, *self.arrays,
                self._prestrain(prestrain_scale), self.fe, self.Ke, self.Rr, self.lcur, self.theta, self.forces,

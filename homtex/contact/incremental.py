@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..analysis.corotational import PARALLEL_ELEMENTS, Corotational
+from ..analysis.corotational import Corotational, element_loop_serial
 from ..errors import InputError, SolverError
 from ..fem.corotational_system import apply_increment
 from ..model.frame import Frame
@@ -216,7 +216,7 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
             self.delta = min(float(initial.delta), self.s.delta_max)
         if prestrain_scale is not None:
             self.prestrain_scale = float(prestrain_scale)
-        self.small = frame.n_elements < PARALLEL_ELEMENTS
+        self.small = element_loop_serial(frame.n_elements)
         self.sys = None
         self._coupled = np.zeros((0, 2), dtype=np.int64)
         self.M = None
