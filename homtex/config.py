@@ -27,8 +27,10 @@ name                         default      meaning
                                           "float32" (half the bytes; CG stays in float64)
 ``tangent_solver``           ``"auto"``   tangent solves of ``solve_nonlinear`` and the large-motion engine:
                                           "ldl" (qdldl LDL^T, inertia counted), "cholmod" (supernodal
-                                          Cholesky, scikit-sparse), "amg" (AMG-PCG on the PD PTC-shifted
-                                          tangent, reused hierarchy), "auto" (rule: ``tangent_auto_dof``)
+                                          Cholesky, scikit-sparse), "pardiso" (MKL PARDISO's supernodal
+                                          LDL^T with pivoting and inertia, the ``pardiso`` extra), "amg"
+                                          (AMG-PCG on the PD PTC-shifted tangent, reused hierarchy),
+                                          "auto" (rule: ``tangent_auto_dof``)
 ``tangent_auto_dof``         ``30000``    "auto": "cholmod" from this many free DOFs on where scikit-sparse
                                           imports, else "ldl" (measured: homtex.linalg.tangent_backends)
 ``contact_aggregation``      ``"elements"`` AMG of contact systems: aggregate along the beam elements only
@@ -77,7 +79,7 @@ SERIAL_BELOW_DOF = 50_000
 SOLVERS = ("amg", "direct", "cg")
 NONLINEAR_SOLVERS = ("auto", "ldl", "lu", "direct")
 AMG_SETUPS = ("fast", "pyamg")
-TANGENT_SOLVERS = ("ldl", "cholmod", "amg", "auto")
+TANGENT_SOLVERS = ("ldl", "cholmod", "pardiso", "amg", "auto")
 AMG_CYCLES = ("numba", "pyamg", "gpu")
 AMG_PRECISIONS = ("float64", "float32")
 

@@ -291,8 +291,8 @@ def _tangent_solver(spec, frame, mask, nf):
         if name == "auto":
             return auto_tangent_solver(nf, nodes, mask)
         return AMGTangent(nodes, mask, tol=min(option("tol"), 1e-10))
-    if name == "cholmod":
-        from ..linalg import tangent_backends  # noqa: F401  (registers it)
+    if name in ("cholmod", "pardiso"):
+        from ..linalg import tangent_backends  # noqa: F401  (registers them)
     return make_tangent_solver(name)
 
 

@@ -1,4 +1,10 @@
-"""Fast tangent solvers behind :mod:`homtex.linalg.tangent_solver`: CHOLMOD and AMG-PCG.
+"""Fast tangent solvers behind :mod:`homtex.linalg.tangent_solver`: CHOLMOD, PARDISO and AMG-PCG.
+
+``"pardiso"`` (:class:`PardisoTangent`): MKL PARDISO's supernodal LDL^T with Bunch-Kaufman pivoting
+(pypardiso), analysis once per pattern, the inertia counted by PARDISO. Measured on the tangents
+of the 43 mm seam cell's press (13 032 DOF, one thread): 3.9 / 4.3 ms per factorisation (PARDISO /
+qdldl) at first contact, 5.6 / 21.8 ms at 70 % where contacts have filled the factor; the same 24
+negative eigenvalues and solves equal to 2e-11.
 
 ``"cholmod"`` (:class:`CholmodTangent`): supernodal Cholesky (scikit-sparse; BLAS threads), the
 symbolic analysis once per pattern, a numeric refactorisation per tangent. It proves positive
@@ -41,11 +47,106 @@ try:  # optional: scikit-sparse
 except Exception:  # pragma: no cover - depends on the machine
     _cholmod = None
 
-__all__ = ["AMGTangent", "CholmodTangent", "ReuseRule", "auto_tangent_solver", "cholmod_available"]
+try:  # optional: pypardiso (Intel MKL PARDISO)
+    import pypardiso as _pypardiso  # type: ignore
+except Exception:  # pragma: no cover - depends on the machine
+    _pypardiso = None
+else:
+    # MKL is loaded now: the thread-pool controllers made before it (once, for speed) do not know
+    # it, so a block limited to one BLAS thread would leave PARDISO on all cores (measured: the
+    # 43 mm seam sewn in 87 s wall with the second core spinning, against 55 s); make them anew
+    from .. import config as _config
+    from . import solvers as _solvers
+
+    _config._CONTROLLER.clear()
+    _solvers._CONTROLLER.clear()
+
+__all__ = ["AMGTangent", "CholmodTangent", "PardisoTangent", "ReuseRule", "auto_tangent_solver", "cholmod_available",
+           "pardiso_available"]
 
 
 def cholmod_available() -> bool:
     return _cholmod is not None
+
+
+def pardiso_available() -> bool:
+    return _pypardiso is not None
+
+
+class PardisoTangent(TangentSolver):
+    """MKL PARDISO's supernodal LDL^T with Bunch-Kaufman pivoting of the symmetric indefinite
+    tangent (matrix type -2, through pypardiso's ctypes binding): the analysis (ordering, symbolic
+    factor) once per pattern, a numeric factorisation per tangent, and the inertia PARDISO counts
+    (iparm 22 / 23: positive / negative eigenvalues). Every solve is checked against the assembled
+    matrix and refined (as ``"ldl"``). Threads: MKL's, which homtex limits to one where it limits
+    BLAS (a small frame's engine step)."""
+
+    name = "pardiso"
+    gives_inertia = True
+
+    def __init__(self, *, refine_tol: float = 1e-9, max_refine: int = 3):
+        if _pypardiso is None:
+            raise ImportError("tangent solver 'pardiso' needs pypardiso (MKL PARDISO): pip install pypardiso")
+        super().__init__()
+        self.refine_tol, self.max_refine = float(refine_tol), int(max_refine)
+        self._ps = None
+        self._csr = None
+        self._pos = self._perm = None
+
+    def _analyse(self, A) -> None:
+        # PARDISO takes the upper triangle row by row with every diagonal entry stored: the CSR of
+        # the stored CSC upper triangle plus the diagonal, its values gathered through a fixed
+        # map at every factorisation
+        n = A.shape[0]
+        cols = np.repeat(np.arange(n), np.diff(A.indptr))
+        order = sp.coo_matrix((np.r_[np.arange(1, A.nnz + 1, dtype=float), np.zeros(n)],
+                               (np.r_[A.indices, np.arange(n)], np.r_[cols, np.arange(n)])), shape=A.shape).tocsr()
+        order.sum_duplicates()
+        order.sort_indices()
+        self._pos = np.flatnonzero(order.data > 0)
+        self._perm = order.data[self._pos].astype(np.int64) - 1
+        self._csr = sp.csr_matrix((np.zeros(len(order.data)), order.indices, order.indptr), shape=A.shape)
+        if self._ps is not None:
+            self._ps.free_memory(everything=True)
+        ps = _pypardiso.PyPardisoSolver(mtype=-2)
+        ps._check_A(self._csr)
+        self._ps = ps
+        self._analysed = False
+
+    def _call(self, phase: int, b: np.ndarray) -> np.ndarray:
+        self._ps.set_phase(phase)
+        return self._ps._call_pardiso(self._csr, b)
+
+    def _factor(self, A, inertia: bool) -> None:
+        self._csr.data[:] = 0.0
+        self._csr.data[self._pos] = A.data[self._perm]
+        zero = np.zeros((A.shape[0], 1))
+        try:
+            if not self._analysed:
+                self._call(11, zero)
+                self._analysed = True
+            self._call(22, zero)
+        except Exception as err:       # PARDISO's error codes (e.g. -4 zero pivot, -2 memory)
+            raise SolverError(f"PARDISO factorisation failed: {err}") from err
+        neg = int(self._ps.get_iparm(23))
+        self.report.negative = neg
+        self.report.positive_definite = neg == 0 and int(self._ps.get_iparm(22)) == A.shape[0]
+
+    def _solve(self, b) -> np.ndarray:
+        b = np.asarray(b, dtype=float)
+        x = self._call(33, b.reshape(-1, 1)).ravel()
+        nb = float(np.linalg.norm(b))
+        if nb == 0.0:
+            return x
+        mv = self.view.matvec
+        r = b - mv(x)
+        for _ in range(self.max_refine):
+            if float(np.linalg.norm(r)) <= self.refine_tol * nb:
+                break
+            self.report.refinements += 1
+            x = x + self._call(33, r.reshape(-1, 1)).ravel()
+            r = b - mv(x)
+        return x
 
 
 class CholmodTangent(TangentSolver):
@@ -269,3 +370,4 @@ def auto_tangent_solver(nf: int, nodes=None, mask=None) -> TangentSolver:
 
 register_tangent_solver("cholmod", CholmodTangent)
 register_tangent_solver("amg", AMGTangent)
+register_tangent_solver("pardiso", PardisoTangent)
