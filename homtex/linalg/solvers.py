@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-from ..config import option
+from ..config import _blas_controller, option
 from ..errors import InputError, SolverError
 from ..validate import check_int, check_tol
 
@@ -31,7 +31,6 @@ try:  # optional, fast sparse Cholesky
 except Exception:  # pragma: no cover - depends on the machine
     _cholmod = None
 
-from threadpoolctl import ThreadpoolController
 
 from .amg import SINGULAR, ScaledAMG, amg_hierarchy, singular_error  # noqa: F401  (re-exported: their home was here)
 
@@ -85,16 +84,11 @@ def constrain(K: sp.bsr_matrix, mask: np.ndarray, diag: float | None = None) -> 
     return A
 
 
-_CONTROLLER: list = []
-
-
 def blas_single_thread():
     """A context limiting BLAS to one thread: BLAS threads inside small dot products slow AMG setup
     and CG many times over. The controller is made once (making one per call, as
     ``threadpool_limits`` does, cost 0.37 ms, up to 45 % of a small contact solve; reusing it 0.01 ms)."""
-    if not _CONTROLLER:
-        _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0].limit(limits=1, user_api="blas")
+    return _blas_controller().limit(limits=1, user_api="blas")
 
 
 def pcg(A, b, M, *, x0=None, tol: float = 1e-10, maxiter: int = 1000):
