@@ -131,20 +131,7 @@ class PardisoTangent(TangentSolver):
         self.report.positive_definite = neg == 0 and int(self._ps.get_iparm(22)) == A.shape[0]
 
     def _solve(self, b) -> np.ndarray:
-        b = np.asarray(b, dtype=float)
-        x = self._call(33, b.reshape(-1, 1)).ravel()
-        nb = float(np.linalg.norm(b))
-        if nb == 0.0:
-            return x
-        mv = self.view.matvec
-        r = b - mv(x)
-        for _ in range(self.max_refine):
-            if float(np.linalg.norm(r)) <= self.refine_tol * nb:
-                break
-            self.report.refinements += 1
-            x = x + self._call(33, r.reshape(-1, 1)).ravel()
-            r = b - mv(x)
-        return x
+        return self._refined(lambda v: self._call(33, v.reshape(-1, 1)).ravel(), np.asarray(b, dtype=float))[0]
 
 
 class CholmodTangent(TangentSolver):

@@ -166,6 +166,23 @@ class TangentSolver(abc.ABC):
         return x
 
     # -- to implement
+    def _refined(self, solve, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """x = solve(b), refined against the assembled matrix (x += solve(b - A x)) up to
+        ``self.max_refine`` times until ||b - A x|| <= ``self.refine_tol`` ||b||; returns (x, b - A x)."""
+        x = solve(b)
+        nb = float(np.linalg.norm(b))
+        if nb == 0.0:
+            return x, np.zeros_like(b)
+        mv = self.view.matvec
+        r = b - mv(x)
+        for _ in range(self.max_refine):
+            if float(np.linalg.norm(r)) <= self.refine_tol * nb:
+                break
+            self.report.refinements += 1
+            x = x + solve(r)
+            r = b - mv(x)
+        return x, r
+
     def _analyse(self, A) -> None:  # noqa: B027 - an optional hook, not abstract
         """Analyse the sparsity pattern once (default: nothing to analyse)."""
 
@@ -248,20 +265,9 @@ class QdldlTangent(TangentSolver):
             if self._lu is None:
                 raise SolverError("solve before factor")
             return self._lu.solve(b)
-        x = self._qd.solve(b)
+        x, r = self._refined(self._qd.solve, b)
         nb = float(np.linalg.norm(b))
-        if nb == 0.0:
-            return x
-        mv = self.view.matvec
-        r = b - mv(x)
-        for _ in range(self.max_refine):
-            err = float(np.linalg.norm(r)) / nb
-            if err <= self.refine_tol:
-                return x
-            self.report.refinements += 1
-            x = x + self._qd.solve(r)
-            r = b - mv(x)
-        if float(np.linalg.norm(r)) / nb > self.fallback_tol:
+        if nb > 0.0 and float(np.linalg.norm(r)) / nb > self.fallback_tol:
             # LDL^T without pivoting failed on an indefinite matrix: pivoting LU for this solve
             self.report.fallbacks += 1
             log.debug("LDL^T solve inaccurate (%.1e); SuperLU with pivoting", float(np.linalg.norm(r)) / nb)
