@@ -16,8 +16,8 @@ delta the pseudo-time step adapted like a trust region (it grows tenfold after a
 decrease of Pi the quadratic model predicted, a hundredfold after two in a row; it shrinks when
 the factor shows negative pivots or the line search cuts). PTC changes the path to an
 equilibrium, not the equilibrium. The energy the pseudo-viscous term absorbs at fixed prescribed
-motions (sum du^T M du / delta) is recorded: large where the
-state jumps at a fixed plate position (snap-through, a buckling leg).
+motions (sum du^T M du / delta) is recorded: large where the state jumps at a fixed plate position
+(snap-through, a buckling leg).
 
 Every trial state is intersection-free: the step length is capped by the additive CCD of
 :mod:`.ccd` (candidates searched again before a step can reach a pair outside the list) and the
@@ -26,8 +26,8 @@ predictor cut by the CCD), then Newton corrects with an Armijo line search on Pi
 
 Friction is lagged: normal forces and tangent bases frozen at the step's start, re-lagged at
 the converged state until the nodes' normal forces settle (``friction_rounds``; the rounds before
-the settled one are solved to ``round_tol`` only). The energy it
-dissipates over a step is the work of its forces along the straight path of the step.
+the settled one are solved to ``round_tol`` only). The energy it dissipates over a step is the work
+of its forces along the straight path of the step.
 
 Energy bookkeeping (cumulative, per accepted state): external work (trapezoidal), strain energy
 split, contact energy, friction dissipated, stabilisation absorbed, pre-strain work, the balance.
@@ -127,6 +127,7 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
         self.load_scale = 0.0
         self.prestrain_scale = 1.0
         self.delta = self.s.delta0
+        self._trusted = False       # the last Newton step agreed with its quadratic model (:meth:`_adapt`)
         if initial is not None:
             self.cor.ut[...] = initial.ut
             self.cor.Q[...] = initial.Q
