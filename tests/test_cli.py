@@ -112,6 +112,10 @@ def test_homogenize_command_matches_api_and_plots(tmp_path, capsys):
         for c in ds.coords.values():      # units and long names on the coordinates too
             assert "units" in c.attrs and "long_name" in c.attrs, c.name
     np.testing.assert_allclose(C, homtex.homogenize(homtex.load_cell(cell).frame).C, rtol=1e-10)
+    said = capsys.readouterr().out
+    assert "xarray" not in said                    # a summary line: the constants, not the repr
+    with xr.open_dataset(nc) as ds:
+        assert f"E1 {float(ds.E1):.4g}" in said and "largest relative residual" in said
     assert main(["plot", str(nc), "--out", str(tmp_path / "p.png")]) == 0
     assert (tmp_path / "p.png").stat().st_size > 5_000
 
@@ -136,7 +140,7 @@ def _linear_curve(path, modulus=100.0, end=0.5):
                                    attrs={"thickness_mm": 20.0, "status": "ok"}), path)
 
 
-def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_path):
+def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_path, capsys):
     """cell, compress, seam, macro and study from the shell: each writes its files, named after
     the cell file, and what is in them is what the API gives (closed forms where there are any)."""
     import homtex
@@ -149,11 +153,16 @@ def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_pat
     mesh = meshio.read(tmp_path / "cell" / "spacer_20mm_cell.vtu")
     assert sum(len(c.data) for c in mesh.cells) == homtex.load_cell(spacer).frame.n_elements
 
+    capsys.readouterr()
     assert main(["compress", spacer, "--strain", "0.1", "--steps", "5", "--out", str(tmp_path / "c")]) == 0
+    said = capsys.readouterr().out
     stored = tmp_path / "c" / "spacer_20mm_compression.nc"
     with xr.open_dataset(stored) as ds:
         api = homtex.compress(homtex.load_cell(spacer), strain=0.1, steps=5)
         np.testing.assert_allclose(ds.stress.values, api.stress.values, rtol=1e-8)
+        # a summary line, not the Dataset's repr: the last stress and the force on 121 cm^2 it means
+        assert "xarray" not in said and f"{ds.stress.values[-1]:.4g}" in said
+        assert f"{12.1 * ds.stress.values[-1]:.4g} N on a 121 cm^2 plate at 10 %" in said
         assert ds.attrs["geometry"] == api.attrs["geometry"] == "nonlinear"   # one default: the engine
         s, e = ds.stress.values, ds.strain.values
     assert (tmp_path / "c" / "spacer_20mm_compression.png").exists()
@@ -180,8 +189,12 @@ def test_stage_commands_write_netcdf_and_png_with_the_physics_of_the_api(tmp_pat
         assert np.all(np.diff(F) >= 0.0)
     assert (tmp_path / "m" / "spacer_20mm_macro_24mm.png").exists()
 
+    capsys.readouterr()
     assert main(["study", "studies/configs/square_stiffness.toml", "--out", str(tmp_path / "st")]) == 0
+    said = capsys.readouterr().out
     with xr.open_dataset(tmp_path / "st" / "result.nc") as ds:
+        assert "xarray" not in said
+        assert f"{ds['status'].size} of {ds['status'].size} points ok" in said
         E = ds["yarns.strut.E"].values[:, None]
         r = ds["yarns.strut.radius"].values[None, :]
         a = 1.0                                                  # cells/square.toml pitch, mm

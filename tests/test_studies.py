@@ -132,7 +132,12 @@ def test_study_files_load(config, tmp_path):
         copy.parent.mkdir(parents=True)
         shutil.copy(config, copy)
         text = copy.read_text().replace("../../cells/", str(config.parents[2] / "cells") + "/")
-        curve = tmp_path / "results" / "compress" / "unseamed_compression.nc"
+        # the file the recipe's command writes (`homtex compress CELL ... --out results/compress`,
+        # from the checkout's root) is the one curve_file names
+        recipe = next(ln for ln in config.read_text().splitlines() if "homtex compress" in ln).split()
+        cell_arg, out_arg = recipe[recipe.index("compress") + 1], recipe[recipe.index("--out") + 1]
+        from homtex.app.paths import stem_of
+        curve = tmp_path / out_arg / f"{stem_of(homtex.load_cell(cell_arg))}_compression.nc"
         curve.parent.mkdir(parents=True)
         e = np.linspace(0.02, 0.5, 25)
         homtex.output.io.write_netcdf(xr.Dataset({"stress": ("strain", 40.0 * e, {"units": "kPa"})},

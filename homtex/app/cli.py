@@ -83,10 +83,10 @@ def cmd_cell(args) -> None:
 
 
 def cmd_homogenize(args) -> None:
-    from .commands import homogenize_cell
+    from .commands import homogenize_cell, homogenize_summary
 
     ds, paths = homogenize_cell(args.cell, _out(args, "results/homogenize"), solver=args.solver)
-    _say(str(ds))
+    _say(homogenize_summary(ds))
     for p in paths:
         _say(f"  wrote {p}")
     _check_status(args, ds)
@@ -98,9 +98,9 @@ def cmd_compress(args) -> None:
                          "default): the linear contact solve is frictionless")
     from .commands import compress_cell
 
-    ds, paths = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
-                              steps=args.steps, geometry=args.geometry, friction=args.friction)
-    _say(str(ds))
+    ds, paths, line = compress_cell(args.cell, _out(args, "results/compress"), strain=args.strain,
+                                    steps=args.steps, geometry=args.geometry, friction=args.friction)
+    _say(line)
     for p in paths:
         _say(f"  wrote {p}")
     _check_status(args, ds)
@@ -154,7 +154,8 @@ def cmd_study(args) -> None:
 
     ds = run_study(args.study, args.out, scheduler=args.scheduler, workers=args.workers,
                    keep_failed=args.keep_failed, connect_timeout=args.connect_timeout)
-    _say(str(ds))
+    dims = ", ".join(f"{k} {v}" for k, v in ds.sizes.items())
+    _say(f"study {Path(args.study).stem}: {summarize(ds)} (dimensions: {dims})")
     result = Path(args.out) / "result.nc"
     n_failed = int(ds.attrs["points_failed"])
     if ds.attrs["complete"]:

@@ -83,6 +83,17 @@ def cell_summary(path, out: Path) -> dict:
     return paths
 
 
+def homogenize_summary(ds) -> str:
+    """One line: the engineering constants (moduli in the Dataset's units), the solver's largest
+    relative residual and its time."""
+    unit = str(ds["C"].attrs.get("units", ""))
+    consts = [k for k in ds.data_vars if ds[k].ndim == 0 and k[:1] in ("E", "G", "n")]
+    text = ", ".join(f"{k} {float(ds[k]) + 0.0:.4g}" + ("" if k.startswith("nu") else f" {unit}") for k in consts)
+    seconds = float(ds.solve_seconds.sum()) + float(ds.attrs.get("setup_seconds", 0.0))
+    return (f"{text or 'no engineering constants (a free or degenerate cell)'}; largest relative residual "
+            f"{float(ds.residual.max()):.1e}; {seconds:.2g} s")
+
+
 def homogenize_cell(path, out: Path, *, solver="amg"):
     """Effective stiffness of a periodic cell file: ``<stem>_homogenized.nc`` + a chart of C and
     the engineering constants. Returns (Dataset, [paths])."""
@@ -112,9 +123,24 @@ def compress_cell(path, out: Path, *, strain=0.3, steps=20, geometry="nonlinear"
     name = f"{stem_of(cell)}_compression" + ("" if geometry == "nonlinear" else "_linear")
     curve, summ, paths = unseamed_stage(cell, Path(out), strain=strain, steps=steps, progress=True, name=name,
                                         geometry=geometry, friction=friction)
-    log.info(f"modulus {summ['modulus_kPa']:.1f} kPa; stress at 10/25/40 %: {summ['stress_10_kPa']:.2f} / "
-             f"{summ['stress_25_kPa']:.2f} / {summ['stress_40_kPa']:.2f} kPa; status {curve.attrs['status']}")
-    return curve, list(paths.values())
+    line = compress_summary(curve)
+    log.info(line)
+    return curve, list(paths.values()), line
+
+
+def compress_summary(ds) -> str:
+    """One line: stress at up to five levels, the force on the 121 cm^2 plate at the end, the worst
+    energy balance (engine), the status."""
+    s, sig = ds.strain.values, ds.stress.values
+    pick = sorted({int(round(i)) for i in np.linspace(0, len(s) - 1, min(len(s), 5))})
+    parts = [f"{ds.attrs.get('geometry', '?')} model: stress " + " / ".join(f"{sig[i]:.4g}" for i in pick)
+             + " kPa at " + " / ".join(f"{100 * s[i]:.3g}" for i in pick) + " %"]
+    if len(s):
+        parts.append(f"{sig[-1] * 12.1:.4g} N on a 121 cm^2 plate at {100 * s[-1]:.3g} %")
+    if "energy_balance" in ds and ds.energy_balance.size:
+        parts.append(f"energy balance within {100 * float(np.nanmax(np.abs(ds.energy_balance.values))):.2g} %")
+    parts.append(f"status {ds.attrs.get('status', 'ok')}")
+    return "; ".join(parts)
 
 
 def seam_cell(path, out: Path, *, seam_distance, prestrain=None, method="yarn"):
@@ -319,5 +345,6 @@ def plot_file(path, out=None, *, var=None, sel=None) -> Path:
     return save(fig, png)
 
 
-__all__ = ["cell_summary", "compress_cell", "homogenize_cell", "knit_cells", "load", "macro_cell",
+__all__ = ["cell_summary", "compress_cell", "compress_summary", "homogenize_cell", "homogenize_summary", "knit_cells",
+           "load", "macro_cell",
            "macro_summary", "plot_file", "read_dataset", "seam_cell", "tensile_cell", "tensile_summary"]
