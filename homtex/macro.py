@@ -72,6 +72,13 @@ __all__ = ["LAW_STEPS", "LAW_STRAIN", "column_heights", "cushion_law", "engine_l
 PRE_STRESS = ("thread", "held", "released")
 LAWS = ("columns", "cushion")
 
+#: what each law is worth against yarn-level strips of three differing seams (docs/seams.md)
+LAW_ACCURACY = {
+    "columns": "column model: 26-40 % off yarn-level strips to 50 % (largest stress difference over the strip's "
+               "stress at 50 %; too stiff early); law='cushion' is 1.3 % off (docs/seams.md)",
+    "cushion": "each cushion on the seam cell's yarn-level curve: 1.3 % off a yarn-level strip to 50 % (largest "
+               "stress difference over the strip's stress at 50 %; docs/seams.md)"}
+
 #: the default unseamed law: the engine's curve to this strain in this many plate steps
 LAW_STRAIN = 0.7
 LAW_STEPS = 35
@@ -305,7 +312,13 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         ``homtex.seam_profile`` (e.g. ``{"method": "foundation"}``) where they are called.
     law : "columns" (default; module docstring) or "cushion": every cushion on the sewn cell's own
         yarn-level curve (``cushion_curve``, a Dataset with ``stress`` kPa over ``strain`` from H0, or
-        :func:`cushion_law`), shifted by its height difference delta_k in plate travel.
+        :func:`cushion_law`), shifted by its height difference delta_k in plate travel. Which to
+        trust (measured against yarn-level strips of three differing seams, largest stress
+        difference to 50 % over the strip's stress there, docs/seams.md): "cushion" 1.3 %,
+        "columns" 26-40 % (too stiff early: its columns carry the pile's plateau at once). "columns"
+        is the default because it needs no yarn-level press (milliseconds on cached inputs, where
+        "cushion" first presses the seam cell, minutes per seam distance); the result's attrs
+        ``law_accuracy`` says this too.
 
     Returns
     -------
@@ -420,5 +433,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                "cushion_height_mean_mm": float(np.mean(list(per.values()))),
                "cushion_height_min_mm": float(min(per.values())), "cushion_height_max_mm": float(max(per.values())),
                "first_contact_mm": float(H0 - h.max()), "full_contact_mm": float(H0 - h.min()),
+               "law_accuracy": LAW_ACCURACY[mode] if seam_distance is not None else
+               "no seams: every column on the unseamed compression law itself",
                "seconds": seconds, "seconds_inputs": t_sub})
     return set_status(ds, status, detail)

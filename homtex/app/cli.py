@@ -338,9 +338,9 @@ def _add_macro(sub) -> None:
                         "foundation model (default: %(default)s)")
     s.add_argument("--law", choices=("columns", "cushion"), default="columns",
                    help="columns: every strip of the plate on the unseamed law from its own height (fast, no "
-                        "sewing); cushion: every cushion on the sewn seam cell's own yarn-level curve, shifted by its "
-                        "height (needs --distance; the first call sews and presses, minutes, then cached) "
-                        "(default: %(default)s)")
+                        "sewing; 26-40 %% off yarn-level strips to 50 %%); cushion: every cushion on the sewn seam "
+                        "cell's own yarn-level curve, shifted by its height (1.3 %% off; needs --distance; the first "
+                        "call sews and presses, minutes, then cached) (default: %(default)s)")
     _add_out(s, "results/macro")
     s.set_defaults(func=cmd_macro)
 
