@@ -67,7 +67,8 @@ from .model.results import Status, set_status
 from .seams import seam_compression, seam_profile
 from .validate import check_choice, check_int, check_number, check_seed
 
-__all__ = ["LAW_STEPS", "LAW_STRAIN", "column_heights", "cushion_law", "engine_law", "macro_curve", "unseamed_law"]
+__all__ = ["LAW_ACCURACY", "LAW_STEPS", "LAW_STRAIN", "column_heights", "cushion_law", "engine_law", "macro_curve",
+           "unseamed_law"]
 
 PRE_STRESS = ("thread", "held", "released")
 LAWS = ("columns", "cushion")
@@ -77,7 +78,8 @@ LAW_ACCURACY = {
     "columns": "column model: 26-40 % off yarn-level strips to 50 % (largest stress difference over the strip's "
                "stress at 50 %; too stiff early); law='cushion' is 1.3 % off (docs/seams.md)",
     "cushion": "each cushion on the seam cell's yarn-level curve: 1.3 % off a yarn-level strip to 50 % (largest "
-               "stress difference over the strip's stress at 50 %; docs/seams.md)"}
+               "stress difference over the strip's stress at 50 %; docs/seams.md)",
+    "none": "no seams: every column on the unseamed compression law itself"}
 
 #: the default unseamed law: the engine's curve to this strain in this many plate steps
 LAW_STRAIN = 0.7
@@ -312,13 +314,8 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         ``homtex.seam_profile`` (e.g. ``{"method": "foundation"}``) where they are called.
     law : "columns" (default; module docstring) or "cushion": every cushion on the sewn cell's own
         yarn-level curve (``cushion_curve``, a Dataset with ``stress`` kPa over ``strain`` from H0, or
-        :func:`cushion_law`), shifted by its height difference delta_k in plate travel. Which to
-        trust (measured against yarn-level strips of three differing seams, largest stress
-        difference to 50 % over the strip's stress there, docs/seams.md): "cushion" 1.3 %,
-        "columns" 26-40 % (too stiff early: its columns carry the pile's plateau at once). "columns"
-        is the default because it needs no yarn-level press (milliseconds on cached inputs, where
-        "cushion" first presses the seam cell, minutes per seam distance); the result's attrs
-        ``law_accuracy`` says this too.
+        :func:`cushion_law`), shifted by its height difference delta_k in plate travel. Worth:
+        :data:`LAW_ACCURACY` (in the result's attrs; "cushion" first presses the cell, minutes).
 
     Returns
     -------
@@ -345,8 +342,7 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
         seam_distance = check_number(seam_distance, "seam_distance", gt=0.0, le=1e4)
     elif profile is not None:
         raise InputError("macro_curve: a profile needs its seam_distance (mm); without seams give neither")
-    if thickness is not None:
-        thickness = check_number(thickness, "thickness", gt=0.0, le=1e4)
+    thickness = None if thickness is None else check_number(thickness, "thickness", gt=0.0, le=1e4)
     for name, opts in (("compress_options", compress_options), ("profile_options", profile_options)):
         if opts is not None and not isinstance(opts, dict):
             raise InputError(f"{name} must be a dict of keyword arguments, got {type(opts).__name__}")
@@ -428,12 +424,11 @@ def macro_curve(cell=None, *, seam_distance=None, height_scatter: float = 0.0, p
                "plate_area_mm2": float(plate_area),
                "seam_distance_mm": "none" if seam_distance is None else float(seam_distance),
                "height_scatter_mm": float(height_scatter), "seed": "none" if seed is None else int(seed),
-               "n_columns": int(n_columns), "pre_stress": pre_stress,
-               "slack_travel_mm": "none" if delta is None else float(delta), "seam_offset_mm": float(seam_offset),
+               "n_columns": int(n_columns), "pre_stress": pre_stress, "seam_offset_mm": float(seam_offset),
+               "slack_travel_mm": "none" if delta is None else float(delta),
                "cushion_height_mean_mm": float(np.mean(list(per.values()))),
                "cushion_height_min_mm": float(min(per.values())), "cushion_height_max_mm": float(max(per.values())),
                "first_contact_mm": float(H0 - h.max()), "full_contact_mm": float(H0 - h.min()),
-               "law_accuracy": LAW_ACCURACY[mode] if seam_distance is not None else
-               "no seams: every column on the unseamed compression law itself",
+               "law_accuracy": LAW_ACCURACY[mode if seam_distance is not None else "none"],
                "seconds": seconds, "seconds_inputs": t_sub})
     return set_status(ds, status, detail)
