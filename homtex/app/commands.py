@@ -346,5 +346,5 @@ def plot_file(path, out=None, *, var=None, sel=None) -> Path:
 
 
 __all__ = ["cell_summary", "compress_cell", "compress_summary", "homogenize_cell", "homogenize_summary", "knit_cells",
-           "load", "macro_cell",
-           "macro_summary", "plot_file", "read_dataset", "seam_cell", "tensile_cell", "tensile_summary"]
+           "load", "macro_cell", "macro_summary", "plot_file", "read_dataset", "seam_cell", "tensile_cell",
+           "tensile_summary"]
