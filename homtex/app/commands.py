@@ -128,11 +128,16 @@ def compress_cell(path, out: Path, *, strain=0.3, steps=20, geometry="nonlinear"
     return curve, list(paths.values()), line
 
 
+def _levels(n: int, at_most: int = 5) -> list:
+    """Indices of up to ``at_most`` levels spread evenly over ``n`` (first and last included)."""
+    return sorted({int(round(i)) for i in np.linspace(0, n - 1, min(n, at_most))})
+
+
 def compress_summary(ds) -> str:
     """One line: stress at up to five levels, the force on the 121 cm^2 plate at the end, the worst
     energy balance (engine), the status."""
     s, sig = ds.strain.values, ds.stress.values
-    pick = sorted({int(round(i)) for i in np.linspace(0, len(s) - 1, min(len(s), 5))})
+    pick = _levels(len(s))
     parts = [f"{ds.attrs.get('geometry', '?')} model: stress " + " / ".join(f"{sig[i]:.4g}" for i in pick)
              + " kPa at " + " / ".join(f"{100 * s[i]:.3g}" for i in pick) + " %"]
     if len(s):
@@ -177,7 +182,7 @@ def tensile_summary(ds) -> str:
     """One line: force per width at up to five levels, the width, the peak filament stress, the
     first level beyond the failure stress, the worst energy balance, the status."""
     s, f = ds.strain.values, ds.force_per_width.values
-    pick = sorted({int(round(i)) for i in np.linspace(0, len(s) - 1, min(len(s), 5))})
+    pick = _levels(len(s))
     fs = ds.attrs.get("failure_stress_MPa")
     first = float(ds.attrs.get("first_failure_strain", math.nan))
     if fs is None:
