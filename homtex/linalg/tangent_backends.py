@@ -31,7 +31,10 @@ inertia is a Krylov probe, not a count.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import logging
+import os
 import time
 
 import numpy as np
@@ -61,6 +64,26 @@ else:
 
 __all__ = ["AMGTangent", "CholmodTangent", "PardisoTangent", "ReuseRule", "auto_tangent_solver", "cholmod_available",
            "pardiso_available"]
+
+
+_MKL_RT: str | None = None
+
+
+def _pardiso_solver():
+    """A pypardiso solver for a symmetric indefinite matrix. pypardiso looks for MKL's runtime
+    library at every construction (a recursive glob under sys.prefix: 0.3-0.7 s, which a new
+    contact pattern paid in every analysis); the library found first is handed to the later ones
+    through pypardiso's own ``PYPARDISO_MKL_RT``."""
+    global _MKL_RT
+    if _MKL_RT is None or "PYPARDISO_MKL_RT" in os.environ:
+        ps = _pypardiso.PyPardisoSolver(mtype=-2)
+        _MKL_RT = getattr(ps.libmkl, "_name", None)
+        return ps
+    os.environ["PYPARDISO_MKL_RT"] = _MKL_RT
+    try:
+        return _pypardiso.PyPardisoSolver(mtype=-2)
+    finally:
+        del os.environ["PYPARDISO_MKL_RT"]
 
 
 def cholmod_available() -> bool:
@@ -106,14 +129,43 @@ class PardisoTangent(TangentSolver):
         self._csr = sp.csr_matrix((np.zeros(len(order.data)), order.indices, order.indptr), shape=A.shape)
         if self._ps is not None:
             self._ps.free_memory(everything=True)
-        ps = _pypardiso.PyPardisoSolver(mtype=-2)
+        self._ia = (self._csr.indptr + 1).astype(np.int32)
+        self._ja = (self._csr.indices + 1).astype(np.int32)
+        ps = _pardiso_solver()
         ps._check_A(self._csr)
+        # no refinement steps inside PARDISO's solve (pypardiso sets up to 2, each a triangular solve
+        # and a product): every solve is refined here against the assembled matrix anyway
+        ps.set_iparm(8, 0)
         self._ps = ps
         self._analysed = False
 
+    def __del__(self):
+        # PARDISO's factor lives in MKL's memory until phase -1: an engine that changes its contact
+        # pattern drops hundreds of these (483 over the 43 mm seam's press)
+        ps = getattr(self, "_ps", None)
+        if ps is not None:
+            with contextlib.suppress(Exception):
+                ps.free_memory(everything=True)
+
     def _call(self, phase: int, b: np.ndarray) -> np.ndarray:
-        self._ps.set_phase(phase)
-        return self._ps._call_pardiso(self._csr, b)
+        # pypardiso's own call converts the index arrays to 1-based int32 at every call (two copies
+        # of the pattern per factorisation and per solve); they are made once per pattern here
+        ps, A = self._ps, self._csr
+        b = np.asfortranarray(b, dtype=float)
+        x = np.zeros_like(b)
+        err = ctypes.c_int32(0)
+        i32 = ctypes.POINTER(ctypes.c_int32)
+        f64 = ctypes.POINTER(ctypes.c_double)
+        ps._mkl_pardiso(ps.pt.ctypes.data_as(ctypes.POINTER(ps._pt_type[0])), ctypes.byref(ctypes.c_int32(1)),
+                        ctypes.byref(ctypes.c_int32(1)), ctypes.byref(ctypes.c_int32(ps.mtype)),
+                        ctypes.byref(ctypes.c_int32(phase)), ctypes.byref(ctypes.c_int32(A.shape[0])),
+                        A.data.ctypes.data_as(f64), self._ia.ctypes.data_as(i32), self._ja.ctypes.data_as(i32),
+                        ps.perm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(b.shape[1])),
+                        ps.iparm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(ps.msglvl)),
+                        b.ctypes.data_as(f64), x.ctypes.data_as(f64), ctypes.byref(err))
+        if err.value != 0:
+            raise SolverError(f"PARDISO phase {phase} failed with error {err.value}")
+        return x
 
     def _factor(self, A, inertia: bool) -> None:
         self._csr.data[:] = 0.0
