@@ -4,7 +4,8 @@
 (pypardiso), analysis once per pattern, the inertia counted by PARDISO. Measured on the tangents
 of the 43 mm seam cell's press (13 032 DOF, one thread): 3.9 / 4.3 ms per factorisation (PARDISO /
 qdldl) at first contact, 5.6 / 21.8 ms at 70 % where contacts have filled the factor; the same 24
-negative eigenvalues and solves equal to 2e-11.
+negative eigenvalues and solves equal to 2e-11. Over whole runs (docs/performance.md): 12.0 / 33.5 ms
+per factorisation on the 43 mm press, 21 / 121 ms on the relaxing 20-filament jersey.
 
 ``"cholmod"`` (:class:`CholmodTangent`): supernodal Cholesky (scikit-sparse; BLAS threads), the
 symbolic analysis once per pattern, a numeric refactorisation per tangent. It proves positive
