@@ -1,5 +1,8 @@
 """The tangent-solver interface (homtex.linalg.tangent_solver): analyse, factor, solve, report."""
 
+import gc
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -178,8 +181,6 @@ def test_a_new_pardiso_pattern_does_not_search_the_disk_for_mkl_again(monkeypatc
     (0.3-0.7 s, once per contact pattern of the engine); after the first, homtex hands it the path
     it found, and leaves the environment as it was."""
     PardisoTangent = _pardiso()
-    import os
-
     import pypardiso.pardiso_wrapper as pw
 
     S = _random_sym(40, 4, 6.0)
@@ -205,8 +206,6 @@ def test_a_dropped_pardiso_factor_hands_its_memory_back_to_mkl(monkeypatch):
     new contact pattern (483 in the 43 mm seam's press, about 6.5 MB each on a 13 000-DOF
     Laplacian), so a dropped one frees it."""
     PardisoTangent = _pardiso()
-    import gc
-
     import pypardiso
 
     freed = []

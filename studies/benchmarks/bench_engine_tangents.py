@@ -107,9 +107,16 @@ def main(argv=None) -> None:
 
     load0 = os.getloadavg()[0]
     print(f"{machine()}, load {load0:.2f}", flush=True)
+    before = os.environ.get("HOMTEX_CACHE_DIR")
     with tempfile.TemporaryDirectory() as cache:
         os.environ["HOMTEX_CACHE_DIR"] = cache          # a cold cache: the sewing is this run's own
-        rows, levels = run(a.quick, a.distance, a.strain)
+        try:
+            rows, levels = run(a.quick, a.distance, a.strain)
+        finally:
+            if before is None:
+                del os.environ["HOMTEX_CACHE_DIR"]
+            else:
+                os.environ["HOMTEX_CACHE_DIR"] = before
     names = [r["solver"] for r in rows]
     units = {"cpu": "s", "wall": "s", "factor_seconds": "s", "solve_seconds": "s"}
     data = {k: (("solver",), np.array([r[k] for r in rows], float), {"units": units.get(k, "1")})
