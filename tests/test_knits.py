@@ -176,8 +176,17 @@ def test_a_yarn_of_three_filaments_relaxes_as_its_equivalent_yarn_does():
         out[model] = r.attrs
     assert len(np.unique(base.replace(**{"parameters.yarn_model.model": "filaments",
                                          "parameters.yarn_model.filaments": 3}).frame.yarn)) == 3
-    for k in ("course_spacing_mm", "relaxed_loop_height_mm"):
+    for k in ("course_spacing_mm", "relaxed_loop_height_mm", "wale_spacing_mm"):
         assert out["filaments"][k] == pytest.approx(out["equivalent"][k], rel=0.03)
+    a = out["filaments"]
+    # the filaments start laid around relaxed axes that kept the bundles apart (measured from the
+    # generated loops their wale spacing came out 6.6 % under the equivalent yarn's; 1 % from the axes)
+    assert a["axis_contact_radius_mm"] > 2 * 0.0085 and a["axis_newton_iterations"] > 0
+    assert a["start_wale_spacing_mm"] < 0.6 * a["generated_wale_spacing_mm"]
+    # the ledger counts from that start: released = stored energy's decrease + the take-down's work
+    released = (a["start_strain_energy_Nmm"] + a["start_contact_energy_Nmm"] - a["strain_energy_Nmm"]
+                - a["contact_energy_Nmm"] + a["take_down_work_Nmm"])
+    assert a["released_energy_Nmm"] == pytest.approx(released, rel=1e-6)
 
 
 def test_a_1x1_rib_pulls_its_wales_together():

@@ -46,10 +46,13 @@ from .weft_knit import course_curve, hex_offsets, knit_geometry, parse_notation,
 
 log = logging.getLogger(__name__)
 
-__all__ = ["build_cell", "creation_overlaps", "knit_frame"]
+__all__ = ["build_cell", "bundle_axis", "creation_overlaps", "knit_frame", "lay_bundles"]
 
 KEYS = ("notation", "needles", "loop_length", "wale_spacing", "course_spacing", "repeat", "yarn", "yarn_model",
         "compression")
+#: the bundle's axis keeps its neighbours this much further off than the outermost filament's offset,
+#: for the mitre with which the filaments are laid at its bends (1 / cos(theta / 2) = 1.1 at 49 degrees)
+MITRE_ROOM = 1.1
 MODEL_KEYS = ("filaments", "model", "packing", "gap", "density", "failure_stress")
 COMP_KEYS = ("travel", "force", "diameter", "core_fraction", "contact_length", "shell", "stiffness", "exponent",
              "source")
@@ -110,8 +113,8 @@ def knit_frame(pattern, geo: dict, yarn, ym: dict, element_length: float, repeat
             centre.append(resample(cur, width, n_el))
             course_of.append(q * C + j)
     periods = np.array([[width, 0.0, 0.0], [0.0, height, 0.0]])
-    nf = ym["filaments"] if ym["model"] == "filaments" else 1
-    offs = hex_offsets(nf, 2.0 * ym["filament_radius"] * (1.0 + ym["gap"])) if nf > 1 else np.zeros((1, 2))
+    offs = bundle_offsets(ym)
+    nf = len(offs)
     nodes, els, yarn_id, img, crs, fil = [], [], [], [], [], []
     base = 0
     for cid, pts in zip(course_of, centre):
@@ -129,19 +132,94 @@ def knit_frame(pattern, geo: dict, yarn, ym: dict, element_length: float, repeat
             crs.append(np.full(k, cid))
             fil.append(np.full(k, f))
             base += k
-    n_model = ym["filaments"]
-    rf = ym["filament_radius"]
-    if ym["model"] == "filaments" or n_model == 1:
+    if ym["model"] == "filaments" or ym["filaments"] == 1:
         radius, rc, bf, tf = (yarn.a, yarn.b), yarn.rc, yarn.bending_factor, yarn.torsion_factor
-    else:                          # one beam: area N A_f, rigidities N E I_f, N G J_f, the bundle's radius
-        r_area = rf * np.sqrt(n_model)
-        radius, rc = (r_area, r_area), ym["bundle_radius"]
-        bf, tf = yarn.bending_factor / n_model, yarn.torsion_factor / n_model
+    else:
+        radius, rc, bf, tf = _equivalent_section(yarn, ym)
     m = sum(len(e) for e in els)
     frame = Frame(np.vstack(nodes), np.vstack(els), semi_axes=np.broadcast_to(radius, (m, 2)), E=yarn.E, nu=yarn.nu,
                   yarn=np.concatenate(yarn_id), periods=periods, images=np.vstack(img), contact_radius=rc,
                   bending_factor=bf, torsion_factor=tf, strain_limit=yarn.strain_limit)
     return frame, np.concatenate(crs), np.concatenate(fil)
+
+
+def bundle_offsets(ym: dict) -> np.ndarray:
+    """(N, 2) filament positions in a yarn's section about its axis (mm; the first one on the
+    axis), hexagonally packed with the model's clearance; ((0, 0),) for a yarn of one beam."""
+    if ym["model"] != "filaments" or ym["filaments"] == 1:
+        return np.zeros((1, 2))
+    return hex_offsets(ym["filaments"], 2.0 * ym["filament_radius"] * (1.0 + ym["gap"]))
+
+
+def _equivalent_section(yarn, ym: dict) -> tuple:
+    """(semi-axes, contact radius, bending factor, torsion factor) of one beam standing for N
+    filaments: area N A_f, rigidities N E I_f and N G J_f, the packed bundle's radius."""
+    n = ym["filaments"]
+    r_area = ym["filament_radius"] * np.sqrt(n)
+    return (r_area, r_area), ym["bundle_radius"], yarn.bending_factor / n, yarn.torsion_factor / n
+
+
+def bundle_axis(frame: Frame, info: dict, yarn) -> tuple[Frame, np.ndarray]:
+    """The yarns of a filament cell as equivalent beams along their axes, for a start that lays
+    the filaments around relaxed axes (:func:`homtex.knits.relax.relax`).
+
+    Returns (Frame of each bundle's axial filament with the bundle's equivalent section and, for
+    contact, the radius that holds its packed filaments with their clearance: (nc,) nodes, one
+    chain per course; (nc,) the nodes of ``frame`` they are).
+    """
+    ym = info["yarn_model"]
+    e0 = np.flatnonzero(info["filament"] == 0)
+    nodes = frame.elements[e0, 0]
+    renum = np.full(frame.n_nodes, -1, dtype=np.int64)
+    renum[nodes] = np.arange(len(nodes))
+    radius, _, bf, tf = _equivalent_section(yarn, ym)
+    offs = bundle_offsets(ym)
+    # the packed filaments with their clearance, and room for the mitre of lay_bundles at a loop's bends
+    envelope = float(MITRE_ROOM * np.hypot(offs[:, 0], offs[:, 1]).max() + ym["filament_radius"] * (1.0 + ym["gap"]))
+    axis = Frame(frame.nodes[nodes], renum[frame.elements[e0]], semi_axes=np.broadcast_to(radius, (len(e0), 2)),
+                 E=yarn.E, nu=yarn.nu, yarn=info["course"][e0], periods=frame.periods, images=frame.images[e0],
+                 contact_radius=envelope, bending_factor=bf, torsion_factor=tf, strain_limit=yarn.strain_limit)
+    return axis, nodes
+
+
+def lay_bundles(frame: Frame, info: dict, axis: Frame, axis_nodes: np.ndarray, x_axis: np.ndarray,
+                periods: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every filament laid around its yarn's axis moved to ``x_axis`` (nc, 3, mm; the nodes
+    ``axis_nodes`` of ``frame``, the chains of ``axis``) with the lattice ``periods`` (k, 3): each
+    filament keeps its generated place in the section, in the axis's parallel-transported material
+    frame (untwisted, as the generated bundle). The beams' own nodal rotations are not used: on
+    elements as long as a loop's radius they stray from the chords by 20 degrees and lay the
+    filaments of one bundle through each other.
+    Returns (positions (n, 3) mm, rotations from the generated state (n, 3, 3))."""
+    D0 = node_frames(axis)
+    D1 = node_frames(Frame(x_axis, axis.elements, radius=1.0, E=1.0, nu=0.3, periods=periods, images=axis.images))
+    centre = np.empty(frame.n_nodes, dtype=np.int64)
+    course, fil, el = info["course"], info["filament"], frame.elements
+    slot = np.full(frame.n_nodes, -1, dtype=np.int64)
+    slot[axis_nodes] = np.arange(len(axis_nodes))
+    for c in np.unique(course):
+        first = el[(course == c) & (fil == 0), 0]
+        for f in np.unique(fil[course == c]):
+            centre[el[(course == c) & (fil == f), 0]] = slot[first]
+    local = np.einsum("nji,nj->ni", D0[centre], frame.nodes - frame.nodes[axis_nodes][centre])
+    v = np.einsum("nij,nj->ni", D1[centre], local)
+    # mitre: at a node where the axis turns by theta, an offset along the turn grows by 1 / cos(theta / 2)
+    # so that each filament's chord runs parallel to the axis's chord at its place in the section
+    # (plain offsets bring the filaments on the inside of a tight bend through each other)
+    ea = axis.elements
+    chord = x_axis[ea[:, 1]] + axis.images @ periods - x_axis[ea[:, 0]]
+    chord /= np.linalg.norm(chord, axis=1)[:, None]
+    u_out, u_in = np.empty_like(x_axis), np.empty_like(x_axis)
+    u_out[ea[:, 0]], u_in[ea[:, 1]] = chord, chord
+    turn = u_out - u_in
+    s_turn = np.linalg.norm(turn, axis=1)
+    b = turn / np.where(s_turn > 0, s_turn, 1.0)[:, None]
+    cos_half = np.clip(0.5 * np.linalg.norm(u_out + u_in, axis=1), 0.5, 1.0)
+    vb = np.einsum("ni,ni->n", v, b[centre])
+    v += (vb * (1.0 / cos_half[centre] - 1.0))[:, None] * b[centre]
+    x = x_axis[centre] + v
+    Q = np.einsum("nij,nkj->nik", D1, D0)
+    return x, np.ascontiguousarray(Q[centre])
 
 
 def build_cell(parameters: dict, yarns: dict, resolution: dict) -> tuple:

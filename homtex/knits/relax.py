@@ -15,6 +15,14 @@ one quasi-static step: the energy the relaxation releases is what the solver tak
 ledger counts it exactly (:class:`~homtex.contact.incremental.NonlinearSettings`
 ``stabilization="released"``: external work F x extension = released + stored changes).
 
+A yarn of N filaments (``yarn_model.model = "filaments"``) first relaxes as its equivalent yarn
+(one beam per course with the bundle's stiffness) whose contact radius holds the packed filaments
+with room to spare (:func:`~homtex.geometry.knit_cell.bundle_axis`), frictionless with the same
+lattice and take-down; the filaments are then laid around those relaxed axes at their generated
+places in the section (:func:`~homtex.geometry.knit_cell.lay_bundles`) and released as above. The
+ledger of the filament stage counts from the laid state (``start_*`` attrs; ``axis_*`` for the
+axis stage).
+
 The result is a :class:`RelaxedCell`: the relaxed frame (nodes at their relaxed positions, the
 relaxed lattice, the rest state carried along), and ``attrs`` with the relaxed loop length, wale
 and course spacing, loop height and width against the input, the protocol and the solve's figures:
@@ -36,7 +44,9 @@ from ..contact.ipc_system import serial_numba
 from ..contact.lattice import Lattice
 from ..contact.options import Contact
 from ..errors import InputError, SolverError
+from ..geometry.knit_cell import bundle_axis, creation_overlaps, lay_bundles
 from ..model.frame import Frame
+from ..model.rest import RestState, straight_rest
 from ..validate import check_int, check_number
 
 log = logging.getLogger(__name__)
@@ -53,13 +63,21 @@ class RelaxedCell:
     nodes and lattice, for pictures and VTK), ``rest`` (the yarns' rest state seen from it),
     ``state`` (the engine state on the cell's own frame that tests continue from: positions,
     rotations, lattice, the pairs touching at creation), ``attrs`` (loop length, wale and course
-    spacing, loop height and width: relaxed and as generated, mm; the protocol)."""
+    spacing, loop height and width: relaxed and as generated, mm; the protocol), ``cell_rest``
+    (the rest state on the cell's own frame that ``state`` belongs to: for laid filaments the one
+    with their laid lengths; None: the cell's)."""
 
     cell: object
     frame: Frame
     rest: object
     state: object = None
     attrs: dict = field(default_factory=dict)
+    cell_rest: object = None
+
+    @property
+    def rest_on_cell(self):
+        """The yarns' rest state on the cell's own frame (:attr:`cell_rest`, else the cell's)."""
+        return self.cell.info["rest"] if self.cell_rest is None else self.cell_rest
 
     @property
     def info(self) -> dict:
@@ -151,8 +169,13 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
                                  tol=check_number(tol, "tol", gt=0.0, lt=1.0))
     # frictionless release (dry friction would freeze an arbitrary intermediate of the generated
     # geometry), then the state settles with the cell's friction (its contacts stick where they are)
-    sol = _release(cell, frame, info, lat, settings, Contact(friction=0.0, compression=info["compression"]), None)
-    iters = sol.info.iterations
+    start, axis, rest0 = None, {}, info["rest"]
+    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+        start, rest0, axis = _axis_start(cell, frame, info, lat, settings)
+    info = dict(info, rest=rest0)
+    sol = _release(cell, frame, info, lat, settings, Contact(friction=0.0, compression=info["compression"]), start,
+                   restart=start is not None)
+    iters = sol.info.iterations + axis.get("axis_newton_iterations", 0)
     stable = bool(sol.info.negative_eigenvalues == 0)
     if mu > 0:
         sol = _release(cell, frame, info, lat, settings, Contact(friction=mu, compression=info["compression"]),
@@ -161,15 +184,22 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
     x, Q, P = sol.positions.copy(), sol.cor.Q.copy(), sol.lat.periods.copy()
     energy = float(sol.cor.energy.sum())
     before = loop_measures(frame, frame.nodes, frame.periods, info)
+    x0 = frame.nodes if start is None else frame.nodes + start.ut
+    begun = loop_measures(frame, x0, frame.periods if start is None else start.periods, info)
     after = loop_measures(frame, x, P, info)
     new = Frame(x, frame.elements, periods=P, images=frame.images, **frame.element_fields())
     rest = info["rest"].moved(Q, frame.elements)
     attrs = {f"relaxed_{k}_mm": v for k, v in after.items()}
     attrs.update({f"generated_{k}_mm": v for k, v in before.items()})
+    attrs.update({f"start_{k}_mm": v for k, v in begun.items()})
+    attrs.update(axis)
     attrs.update(loop_length_mm=after["loop_length"], wale_spacing_mm=after["wale_spacing"],
                  course_spacing_mm=after["course_spacing"], input_loop_length_mm=float(info["loop_length"]),
                  friction=mu, take_down_N=float(take_down), take_down_on_cell_N=float(force),
-                 protocol=("generated loops of straight yarn released frictionless with contact"
+                 protocol=(("filaments laid around the axes of their yarns relaxed as equivalent yarns of the "
+                            "bundle's outer radius (frictionless, the same lattice and take-down), then "
+                            if start is not None else "") +
+                           "generated loops of straight yarn released frictionless with contact"
                            f"{' (compressible shells)' if info['compression'] is not None else ''}, lattice free in "
                            f"the fabric plane, take-down {take_down:g} N per {PAPER_NEEDLES} needles acting along "
                            f"the wales from the start, one node held; then settled with friction {mu:g}"),
@@ -178,21 +208,57 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
                  take_down_work_Nmm=float(sol.ledger["external_work"]), newton_iterations=int(iters),
                  cpu_seconds=time.process_time() - t0, strain_energy_Nmm=energy,
                  contact_energy_Nmm=float(sol.ledger["contact_energy"] + sol.ledger["B0"]),
-                 generated_contact_energy_Nmm=float(sol.ledger["B0"]),
+                 generated_contact_energy_Nmm=float(sol.ledger["B0"]) if start is None else float("nan"),
+                 start_strain_energy_Nmm=float(sol.ledger["U0"]), start_contact_energy_Nmm=float(sol.ledger["B0"]),
                  stable=stable)
     log.info("relax %s: loop length %.4g mm (input %.4g), wale spacing %.4g mm, course spacing %.4g mm, %d Newton "
              "iterations, %.1f s CPU", cell.name, after["loop_length"], info["loop_length"], after["wale_spacing"],
              after["course_spacing"], attrs["newton_iterations"], attrs["cpu_seconds"])
-    return RelaxedCell(cell=cell, frame=new, rest=rest, state=sol.export_state(), attrs=attrs)
+    return RelaxedCell(cell=cell, frame=new, rest=rest, state=sol.export_state(), attrs=attrs,
+                       cell_rest=None if start is None else rest0)
 
 
-def _release(cell, frame, info, lat, settings, contact, initial) -> IncrementalSolver:
+def _axis_start(cell, frame, info, lat, settings) -> tuple:
+    """A filament cell's start: its yarns relaxed first as equivalent beams whose contact radius
+    holds the packed filaments (cheap, and their bundles cannot interpenetrate), then every filament
+    laid around its relaxed axis (:func:`~homtex.geometry.knit_cell.lay_bundles`). Releasing 20
+    filaments per yarn straight from the generated loops ran out of 5000 Newton iterations (a soft
+    mode of filaments settling on each other as the loops close); from relaxed axes they only settle
+    into the crossings. Returns (EngineState on ``frame``, the filaments' RestState on ``frame``,
+    attrs of the axis stage)."""
+    yarn = cell.yarns[info["yarn_type"][int(frame.yarn[0])]]
+    axis, nodes = bundle_axis(frame, info, yarn)
+    sol = _release(cell, axis, dict(info, rest=straight_rest(axis)), lat, settings, Contact(friction=0.0), None)
+    x, Q = lay_bundles(frame, info, axis, nodes, sol.positions, sol.lat.periods)
+    laid = Frame(x, frame.elements, periods=sol.lat.periods, images=frame.images, **frame.element_fields())
+    ov = creation_overlaps(laid)
+    if ov["count"]:
+        raise SolverError(f"relax {cell.name}: the filaments laid around the relaxed yarn axes overlap "
+                          f"({ov['summary']}); the axes bend too sharply for their elements: use shorter "
+                          "elements ([resolution] element_length)")
+    # each filament axially unstrained where it is laid (rest length = laid length, as the generated
+    # cell's rest lengths are its generated ones): a bundle laid as a solid section would carry
+    # strains of curvature x offset (16 % on the outer filaments of a 20-filament rib's loops), which
+    # real filaments shed by sliding along each other
+    rest = RestState(length=laid.length.copy(), frames=info["rest"].frames.copy()).check(frame)
+    template = IncrementalSolver(frame, {0: [0, 1, 2]}, None, [], Contact(friction=0.0), rest=rest,
+                                 lattice=lat, settings=settings)
+    start = template.export_state()
+    start.ut, start.Q, start.periods = x - frame.nodes, Q, sol.lat.periods.copy()
+    attrs = {"axis_contact_radius_mm": float(axis.contact_radius[0]),
+             "axis_newton_iterations": int(sol.info.iterations),
+             "axis_released_energy_Nmm": float(sol.ledger["stabilization"])}
+    return start, rest, attrs
+
+
+def _release(cell, frame, info, lat, settings, contact, initial, restart: bool = False) -> IncrementalSolver:
     """One quasi-static step from the generated (or an earlier) state to equilibrium with the
-    take-down acting throughout; the ledger counts the energy released (continued: added to it)."""
+    take-down acting throughout; the ledger counts the energy released (continued: added to it;
+    ``restart``: counted from ``initial``)."""
     sol = IncrementalSolver(frame, {0: [0, 1, 2]}, None, [], contact, rest=info["rest"], lattice=lat,
                             settings=settings, initial=initial)
     sol.load_scale = 1.0            # the take-down acts from the start: its work is F x the cell's extension
-    if initial is None:
+    if initial is None or restart:
         sol._start_ledger()
     else:
         sol._react = sol._reactions(sol._evaluate(sol.positions, [], hessian=False))

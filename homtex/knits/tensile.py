@@ -141,7 +141,7 @@ def continue_from(relaxed: RelaxedCell, info, fixed, contact, lattice, tol: floa
     """The engine on the cell's frame at the relaxed state (or ``state``, an EngineState of that
     frame: positions, rotations, lattice, the pairs touching at creation), the lattice's dead
     forces acting from the start, its ledger started afresh there."""
-    sol = IncrementalSolver(relaxed.cell.frame, fixed, None, [], contact, rest=info["rest"], lattice=lattice,
+    sol = IncrementalSolver(relaxed.cell.frame, fixed, None, [], contact, rest=relaxed.rest_on_cell, lattice=lattice,
                             settings=settings(info, tol), initial=relaxed.state if state is None else state)
     sol.delta = sol.s.delta0
     sol.load_scale = 1.0
@@ -152,7 +152,7 @@ def continue_from(relaxed: RelaxedCell, info, fixed, contact, lattice, tol: floa
 def _let_go(relaxed: RelaxedCell, info, contact, free, tol) -> tuple:
     """(EngineState, energy released N mm): the relaxed cell with its take-down removed, the
     courses held at their relaxed length and the ``free`` lattice components free of force."""
-    sol = IncrementalSolver(relaxed.cell.frame, {0: [0, 1, 2]}, None, [], contact, rest=info["rest"],
+    sol = IncrementalSolver(relaxed.cell.frame, {0: [0, 1, 2]}, None, [], contact, rest=relaxed.rest_on_cell,
                             lattice=Lattice(free=free), settings=settings(info, tol, stabilization="released"),
                             initial=relaxed.state)
     before = float(sol.ledger["stabilization"])
