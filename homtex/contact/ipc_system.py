@@ -28,7 +28,7 @@ from .friction import friction_potential
 from .ipc_scene import ContactScene, friction_setup
 from .lattice import LatticeScene, image_motion
 from .lattice_system import BorderedSystem
-from .potential import Enforcement
+from .potential import Enforcement, pair_gaps
 
 __all__ = ["SystemMixin", "lag_change", "serial_numba"]
 
@@ -96,6 +96,14 @@ class SystemMixin:
         new = c[:, 0] * N + c[:, 1]
         if self.sys is not None and np.isin(new, have).all():
             return
+        reach = self.s.pattern_reach
+        st = self.scene.stencil
+        if reach > 0 and self.sys is not None and len(st):
+            # a rebuild takes the pairs about to touch along (NonlinearSettings.pattern_reach)
+            gap = pair_gaps(self._xc(self.positions), st)
+            near = self._real(st.nodes[gap < reach * self.ghat])
+            c2 = self.scene.couplings(near)
+            new = np.union1d(new, c2[:, 0] * N + c2[:, 1])
         allk = np.union1d(have, new)
         self._coupled = np.column_stack([allk // N, allk % N])
         if self.lat is None:

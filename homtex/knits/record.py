@@ -15,6 +15,7 @@ from ..errors import SolverError
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
 from ..output.datasets import curve_dataset
 from ..output.progress import Progress
+from .relax import FILAMENT_PATTERN_REACH
 
 __all__ = ["META", "filament_stresses", "finish", "settings"]
 
@@ -98,6 +99,8 @@ def settings(info, tol: float, **kw) -> NonlinearSettings:
     # 1000 it reaches 12 %, where the loops lock up (docs/knits.md)
     iters = 1000 if info["yarn_model"]["model"] == "filaments" else 200
     kw.setdefault("max_iter", 5000 if kw.get("stabilization") == "released" else iters)
+    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+        kw.setdefault("pattern_reach", FILAMENT_PATTERN_REACH)
     return NonlinearSettings(tol=tol, **kw)
 
 
