@@ -4,7 +4,8 @@ cheap equivalent yarn (the bundle's axial stiffness, the filaments' summed bendi
 rigidity, the packed bundle's contact radius).
 
 ``cells/jersey_eglass.toml`` with ``parameters.yarn_model.filaments = 3`` (the 20 filaments of the
-paper's numerical yarn do not relax in reasonable time, docs/knits.md) and ``model = "filaments"`` /
+paper's numerical yarn relax, ``knit_filaments_relax.py``, but do not get through a first level of
+the pull in half an hour, docs/knits.md) and ``model = "filaments"`` /
 ``"equivalent"``, each relaxed with ``homtex.relax`` (take-down 0.06 N per 5 needles) and pulled with
 ``homtex.tensile(..., direction="wale")`` (periodic cell, free lateral contraction, frictionless
 filaments as the cell file ships them) to 30 % in 15 levels. Recorded per model: force per width
