@@ -13,7 +13,7 @@ iteration, and the cell's element count):
    file's friction 0.3 (target: within 10 minutes);
 4. ``homtex.relax`` of the E-glass rib as the paper's yarn of 20 filaments, each its own beam chain
    (``yarn_model.model = "filaments"``), on MKL PARDISO's LDL^T where the ``pardiso`` extra is
-   installed (its bundles make the tangent's factor fill; qdldl otherwise: the solver is in the
+   installed (its bundles make the tangent's factor fill; qdldl ("ldl") otherwise: the solver is in the
    Dataset's attrs).
 
 Usage::
@@ -122,7 +122,7 @@ def main(argv=None):
     cell = homtex.load_cell(name).replace(**{"parameters.yarn_model.model": "filaments",
                                              "parameters.yarn_model.filaments": n_fil,
                                              **({"resolution.element_length": 0.65} if args.quick else {})})
-    solver = "pardiso" if pardiso_available() else "qdldl"
+    solver = "pardiso" if pardiso_available() else "ldl"
     with homtex.set_options(tangent_solver=solver):
         r, wall, cpu = _timed(homtex.relax, cell)
     row(f"relax {name}, {n_fil} filaments", cell, wall, cpu, int(r.attrs["newton_iterations"]),

@@ -119,7 +119,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     out = setup(args)
     name, n, element = ("jersey_eglass", 3, 0.65) if args.quick else ("rib_1x1_eglass", 20, None)
-    solver = "pardiso" if pardiso_available() else "qdldl"
+    solver = "pardiso" if pardiso_available() else "ldl"
     runs, relaxed = [], None
     with homtex.set_options(tangent_solver=solver):
         for m in MODELS:
