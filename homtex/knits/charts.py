@@ -12,7 +12,7 @@ from ..model.frame import Frame
 from ..model.results import ENERGY_KEYS
 from ..output.charts import _tag, pyplot, save
 
-__all__ = ["energy_split_chart", "knit_picture", "state_frame", "tensile_chart", "write_state_vtk"]
+__all__ = ["draw_cell", "energy_split_chart", "knit_picture", "state_frame", "tensile_chart", "write_state_vtk"]
 
 #: the energy split's names as the paper calls them (section axes e2 / e3 of the yarn's material frame)
 SPLIT = {"axial": "axial", "torsion": "torsion", "bending_y": "bending about e2 (s-axis)",
@@ -30,13 +30,25 @@ def knit_picture(frame: Frame, path, *, tiles=(3, 3), title: str = "", colour=No
     technical face (x along the courses, y along the wales) and a section through the thickness
     (x, z); line width about the yarn's diameter, each course (or ``colour`` (m,) int) its own colour."""
     plt = pyplot()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 5.5), gridspec_kw={"width_ratios": [1.2, 1]})
+    draw_cell(ax, bx, frame, tiles=tiles, colour=colour)
+    ax.set_title("technical face", fontsize=9)
+    bx.set_title("section, one row of cells", fontsize=9)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def draw_cell(ax, bx, frame: Frame, *, tiles=(3, 3), colour=None) -> None:
+    """Draw a knitted cell tiled ``tiles`` times on matplotlib axes: ``ax`` the technical face
+    (x, y), ``bx`` the section through the thickness (x, z) of one row of cells (mm)."""
+    plt = pyplot()
     a = frame.nodes[frame.elements[:, 0]]
     b = a + frame.element_vectors
     P = frame.periods
     col = frame.yarn if colour is None else np.asarray(colour)
     cmap = plt.get_cmap("tab10")
     span = max(tiles[0] * np.linalg.norm(P[0]), tiles[1] * np.linalg.norm(P[1]))
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 5.5), gridspec_kw={"width_ratios": [1.2, 1]})
     width_pt = 2 * float(frame.contact_radius.mean()) / span * 5.0 * 72
     for i in range(tiles[0]):
         for j in range(tiles[1]):
@@ -54,11 +66,6 @@ def knit_picture(frame: Frame, path, *, tiles=(3, 3), title: str = "", colour=No
         axis.set_aspect("equal")
         axis.set_xlabel("x (along the courses), mm")
         axis.set_ylabel(ylab)
-    ax.set_title("technical face", fontsize=9)
-    bx.set_title("section, one row of cells", fontsize=9)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    return save(fig, path)
 
 
 def tensile_chart(curves: dict, *, title: str = "", per_width: bool = True, marks: dict | None = None):

@@ -18,6 +18,7 @@ cell to 2 % (seconds).
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import tempfile
@@ -26,6 +27,11 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import xarray as xr
+
+import homtex
+from homtex.linalg.tangent_backends import pardiso_available
+from homtex.linalg.tangent_solver import TangentSolver
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -33,13 +39,12 @@ from _common import parser, pyplot, save_figure, save_netcdf, setup  # noqa: E40
 from bench_core import machine  # noqa: E402
 
 SOLVERS = ("ldl", "pardiso")
+log = logging.getLogger("studies")
 LEVELS = np.round(np.arange(0.1, 0.71, 0.1), 2)
 
 
 def _counting(counts: Counter):
     """Count and time every factorisation and solve of every tangent solver the engine makes."""
-    from homtex.linalg.tangent_solver import TangentSolver
-
     def wrap(name):
         real = getattr(TangentSolver, name)
 
@@ -56,9 +61,6 @@ def _counting(counts: Counter):
 
 
 def run(quick: bool, distance: float, strain: float) -> tuple[list[dict], list]:
-    import homtex
-    from homtex.linalg.tangent_backends import pardiso_available
-
     counts: Counter = Counter()
     _counting(counts)
     cell = homtex.load_cell("spacer_20mm")
@@ -77,7 +79,7 @@ def run(quick: bool, distance: float, strain: float) -> tuple[list[dict], list]:
     rows = []
     for name in SOLVERS:
         if name == "pardiso" and not pardiso_available():
-            print("  pardiso: pypardiso does not import (pip install 'homtex[pardiso]'); skipped", flush=True)
+            log.info("pardiso: pypardiso does not import (pip install 'homtex[pardiso]'); skipped")
             continue
         counts.clear()
         with homtex.set_options(tangent_solver=name):
@@ -90,10 +92,10 @@ def run(quick: bool, distance: float, strain: float) -> tuple[list[dict], list]:
                "solve_seconds": counts["solve_seconds"], "patterns": counts["analyse"],
                "stress": stress, "status": ds.attrs.get("status", "")}
         rows.append(row)
-        print(f"  {name:8s} {cpu:8.1f} s CPU {wall:8.1f} s wall, {row['factorizations']} factorisations "
-              f"({1e3 * row['factor_seconds'] / max(row['factorizations'], 1):.1f} ms each), {row['solves']} solves "
-              f"({1e3 * row['solve_seconds'] / max(row['solves'], 1):.2f} ms), {row['patterns']} patterns, "
-              f"stress {np.round(stress, 5)} kPa, {row['status']}", flush=True)
+        log.info(f"{name:8s} {cpu:8.1f} s CPU {wall:8.1f} s wall, {row['factorizations']} factorisations "
+                 f"({1e3 * row['factor_seconds'] / max(row['factorizations'], 1):.1f} ms each), {row['solves']} solves "
+                 f"({1e3 * row['solve_seconds'] / max(row['solves'], 1):.2f} ms), {row['patterns']} patterns, "
+                 f"stress {np.round(stress, 5)} kPa, {row['status']}")
     return rows, levels
 
 
@@ -103,10 +105,8 @@ def main(argv=None) -> None:
     p.add_argument("--strain", type=float, default=0.7, help="final plate travel / 20 mm")
     a = p.parse_args(argv)
     out = setup(a)
-    import xarray as xr
-
     load0 = os.getloadavg()[0]
-    print(f"{machine()}, load {load0:.2f}", flush=True)
+    log.info(f"{machine()}, load {load0:.2f}")
     before = os.environ.get("HOMTEX_CACHE_DIR")
     with tempfile.TemporaryDirectory() as cache:
         os.environ["HOMTEX_CACHE_DIR"] = cache          # a cold cache: the sewing is this run's own
@@ -129,7 +129,7 @@ def main(argv=None) -> None:
                     attrs={"machine": machine(), "load_at_start": load0, "case": case, "threads": 1})
     path = save_netcdf(ds, out / "bench_engine_tangents.nc")
     plot(ds, out / "bench_engine_tangents.png")
-    print(f"wrote {path} and {path.with_suffix('.png')}")
+    log.info(f"wrote {path} and {path.with_suffix('.png')}")
 
 
 def plot(ds, path) -> None:

@@ -34,6 +34,7 @@ import numpy as np
 import xarray as xr
 
 import homtex
+from homtex.knits.charts import draw_cell
 from homtex.linalg.tangent_backends import pardiso_available
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -71,32 +72,11 @@ def relax_one(name: str, model: str, n: int, element: float | None):
 def chart(res: xr.Dataset, relaxed, path):
     plt = pyplot()
     fig, (ax, bx, cx) = plt.subplots(1, 3, figsize=(16, 5.2), gridspec_kw={"width_ratios": [1.1, 1.1, 1]})
-    f = relaxed.frame
-    course = relaxed.info["course"]
-    a = f.nodes[f.elements[:, 0]]
-    b = a + f.element_vectors
-    P = f.periods
-    for i in range(2):
-        for j in range(2):
-            s = i * P[0] + j * P[1]
-            for c in np.unique(course):
-                m = course == c
-                seg = np.stack([a[m] + s, b[m] + s], axis=1)
-                ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color=f"C{int(c)}", lw=0.4)
-    for c in np.unique(course):
-        m = course == c
-        seg = np.stack([a[m], b[m]], axis=1)
-        bx.plot(seg[:, :, 0].T, seg[:, :, 2].T, color=f"C{int(c)}", lw=0.4)
-    ax.set_aspect("equal")
-    bx.set_aspect("equal")
-    ax.set_xlabel("x, along the courses, mm")
-    ax.set_ylabel("y, along the wales, mm")
+    draw_cell(ax, bx, relaxed.frame, tiles=(2, 2), colour=relaxed.info["course"])
     n = int(res.attrs["filaments"])
     ax.set_title(f"{res.attrs['cell']} relaxed, {n} filaments per yarn (2 x 2 cells;\none colour per course)",
                  fontsize=9)
-    bx.set_xlabel("x, along the courses, mm")
-    bx.set_ylabel("z, through the thickness, mm")
-    bx.set_title("one cell through the thickness", fontsize=9)
+    bx.set_title("section, one row of cells", fontsize=9)
     w = 0.38
     y = np.arange(len(MEASURES))
     for k, m in enumerate(res.model.values):
