@@ -10,6 +10,7 @@ import time
 import numpy as np
 
 from ..analysis.energy import ledger_check
+from ..contact.engine import FRICTION_STEPPING, PATH_STEPPING
 from ..contact.incremental import NonlinearSettings
 from ..errors import SolverError
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
@@ -102,6 +103,20 @@ def settings(info, tol: float, **kw) -> NonlinearSettings:
     if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
         kw.setdefault("pattern_reach", FILAMENT_PATTERN_REACH)
     return NonlinearSettings(tol=tol, **kw)
+
+
+def stepping(info, friction: bool) -> dict:
+    """Keyword arguments of the knit tests' :class:`~homtex.contact.engine.EngineStepper`: halvings
+    for failures and for accuracy (a step whose stabilisation or imbalance exceeds 0.3 % of its
+    work is redone in halves). Yarns of filaments get no halving for accuracy: a bundle settles in
+    snaps of single filaments at every step size (the 20-filament rib's first 2 % level was halved
+    four times in 9 minutes of CPU and still released energy), so each level is kept once it
+    converges and the energy its snaps release goes to the ledger, which flags the curve past 1 %
+    of the work (docs/knits.md)."""
+    kw = {"max_cuts": 10, "refine": 0.003, **(FRICTION_STEPPING if friction else PATH_STEPPING)}
+    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+        kw["max_refine"] = 0
+    return kw
 
 
 def _attrs(relaxed, info, what, v, mu, L0, width0, steps, sol, t0) -> dict:

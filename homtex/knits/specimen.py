@@ -25,14 +25,14 @@ import time
 
 import numpy as np
 
-from ..contact.engine import FRICTION_STEPPING, PATH_STEPPING, EngineStepper
+from ..contact.engine import EngineStepper
 from ..contact.incremental import IncrementalSolver
 from ..contact.ipc_system import serial_numba
 from ..contact.options import Contact
 from ..errors import InputError, SolverError
 from ..model.frame import Frame
 from ..model.rest import RestState, start_rest
-from .record import _attrs, _positions, _Recorder, finish, march, settings
+from .record import _attrs, _positions, _Recorder, finish, march, settings, stepping
 
 log = logging.getLogger(__name__)
 
@@ -147,8 +147,8 @@ def specimen_test(relaxed, info, wales, courses, strain, v, steps, mu, progress,
                             initial=rel.export_state())
     sol.delta = sol.s.delta0
     sol._start_ledger()
-    stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam), max_cuts=10, refine=0.003,
-                            **(FRICTION_STEPPING if sol.scene.has_friction else PATH_STEPPING))
+    stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam),
+                            **stepping(info, sol.scene.has_friction))
     rec = _Recorder(sol, {**info, "course": np.zeros(spec.n_elements, int), "filament": np.zeros(spec.n_elements, int)},
                     info["yarn_model"].get("failure_stress"))
     mid = np.flatnonzero(np.abs(spec.nodes[:, 1] - 0.5 * (spec.nodes[top, 1].mean() + spec.nodes[bottom, 1].mean()))

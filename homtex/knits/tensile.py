@@ -32,14 +32,14 @@ import time
 
 import numpy as np
 
-from ..contact.engine import FRICTION_STEPPING, PATH_STEPPING, EngineStepper
+from ..contact.engine import EngineStepper
 from ..contact.incremental import IncrementalSolver
 from ..contact.ipc_system import serial_numba
 from ..contact.lattice import Lattice
 from ..contact.options import Contact
 from ..errors import InputError, SolverError
 from ..validate import check_choice, check_int, check_number
-from .record import _attrs, _positions, _Recorder, finish, march, settings
+from .record import _attrs, _positions, _Recorder, finish, march, settings, stepping
 from .relax import RelaxedCell, cell_friction, knit_info, relax
 
 log = logging.getLogger(__name__)
@@ -108,8 +108,8 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
     L0, width0 = float(P0[v, v]), float(np.linalg.norm(P0[w]))
     lat = Lattice(free=tuple(free), motion={(v, v): strain * L0})
     sol = continue_from(relaxed, info, {0: [0, 1, 2]}, contact, lat, tol, state=state)
-    stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam, loads=1.0), max_cuts=10, refine=0.003,
-                            **(FRICTION_STEPPING if sol.scene.has_friction else PATH_STEPPING))
+    stepper = EngineStepper(sol, lambda lam: sol.solve(motion=lam, loads=1.0),
+                            **stepping(info, sol.scene.has_friction))
     rec = _Recorder(sol, info, info["yarn_model"].get("failure_stress"))
     pos, ee, per = [], [], []
     rec.add(0.0, float(sol._react[sol.lat.rows[v], v]), width0, 0.0, width0, 0)
