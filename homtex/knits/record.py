@@ -109,10 +109,10 @@ def stepping(info, friction: bool) -> dict:
     """Keyword arguments of the knit tests' :class:`~homtex.contact.engine.EngineStepper`: halvings
     for failures and for accuracy (a step whose stabilisation or imbalance exceeds 0.3 % of its
     work is redone in halves). Yarns of filaments get no halving for accuracy: a bundle settles in
-    snaps of single filaments at every step size (the 20-filament rib's first 2 % level was halved
-    four times in 9 minutes of CPU and still released energy), so each level is kept once it
-    converges and the energy its snaps release goes to the ledger, which flags the curve past 1 %
-    of the work (docs/knits.md)."""
+    snaps of single filaments at every step size (with five halvings allowed the 20-filament rib's
+    first 2 % level was not finished after 15 minutes of CPU, kept whole it passes in 92 s), so
+    each level is kept once it converges and the energy its snaps release goes to the ledger, which
+    flags the curve past 1 % of the work (docs/knits.md)."""
     kw = {"max_cuts": 10, "refine": 0.003, **(FRICTION_STEPPING if friction else PATH_STEPPING)}
     if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
         kw["max_refine"] = 0
