@@ -18,7 +18,7 @@ strain both reach.
 
 Usage::
 
-    python studies/experiments/knit_filaments_tension.py [--quick] [--paper] [--out DIR] [--no-docs]
+    python studies/experiments/knit_filaments_tension.py [--quick] [--paper] [--strain S] [--out DIR] [--no-docs]
 
 Writes ``knit_filaments_tension.nc`` (dims ``model``, ``strain``) and ``knit_filaments_tension.png``
 (``knit_filaments_tension_rib20.*`` with ``--paper``) into OUT (default
@@ -127,11 +127,15 @@ def main(argv=None):
     p = add_docs_option(parser(__file__, __doc__))
     p.add_argument("--paper", action="store_true",
                    help="the knit paper's 1x1 rib with its yarn of 20 filaments, to 50 %% (over an hour)")
+    p.add_argument("--strain", type=float, default=None,
+                   help="pull to this strain instead (in 2 %% levels; not with --quick)")
     args = p.parse_args(argv)
     out = setup(args)
     name, n, stem = ("rib_1x1_eglass", 20, "knit_filaments_tension_rib20") if args.paper else (
         "jersey_eglass", 3, "knit_filaments_tension")
     strain, steps, element = (0.02, 1, 0.4) if args.quick else (0.5, 25, None) if args.paper else (0.3, 15, None)
+    if args.strain is not None and not args.quick:
+        strain, steps = args.strain, max(int(round(args.strain / 0.02)), 1)       # the same 2 % levels
     solver = "pardiso" if pardiso_available() else "ldl"
     with homtex.set_options(tangent_solver=solver):
         runs = [run_one(name, m, n, strain, steps, element) for m in MODELS]
