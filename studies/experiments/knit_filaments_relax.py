@@ -27,7 +27,6 @@ import logging
 import os
 import platform
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +37,7 @@ from homtex.knits.charts import draw_cell
 from homtex.linalg.tangent_backends import pardiso_available
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _common import add_docs_option, parser, publish, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+from _common import add_docs_option, parser, publish, pyplot, relaxed_yarn_model, save_figure, save_netcdf, setup  # noqa: E402
 
 log = logging.getLogger("studies")
 MODELS = ("filaments", "equivalent")
@@ -47,13 +46,7 @@ MEASURES = ("loop_length", "wale_spacing", "course_spacing", "loop_height", "loo
 
 def relax_one(name: str, model: str, n: int, element: float | None):
     """(RelaxedCell, Dataset of one model's figures)."""
-    changes = {"parameters.yarn_model.filaments": n, "parameters.yarn_model.model": model}
-    if element is not None:
-        changes["resolution.element_length"] = element
-    cell = homtex.load_cell(name).replace(**changes)
-    t0 = time.process_time()
-    r = homtex.relax(cell)
-    cpu = time.process_time() - t0
+    r, cpu = relaxed_yarn_model(name, model, n, element)
     a = r.attrs
     data = {k: ((), float(a[f"relaxed_{k}_mm"]), {"units": "mm", "long_name": f"relaxed {k.replace('_', ' ')}"})
             for k in MEASURES}
@@ -63,7 +56,7 @@ def relax_one(name: str, model: str, n: int, element: float | None):
                            "Newton iterations of the axis stage"),
                           ("energy_balance", float(a["energy_balance"]), "1", "ledger balance"),
                           ("stable", int(bool(a["stable"])), "1", "no negative eigenvalue at the end"),
-                          ("n_elements", cell.frame.n_elements, "1", "beam elements"),
+                          ("n_elements", r.cell.frame.n_elements, "1", "beam elements"),
                           ("status", str(a["status"]), "1", "status of the relaxation")):
         data[k] = ((), v, {"units": u, "long_name": what})
     return r, xr.Dataset(data)

@@ -42,7 +42,7 @@ import homtex
 from homtex.linalg.tangent_backends import pardiso_available
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _common import add_docs_option, parser, publish, pyplot, save_figure, save_netcdf, setup  # noqa: E402
+from _common import add_docs_option, parser, publish, pyplot, relaxed_yarn_model, save_figure, save_netcdf, setup  # noqa: E402
 
 log = logging.getLogger("studies")
 MODELS = ("filaments", "equivalent")
@@ -50,15 +50,10 @@ MODELS = ("filaments", "equivalent")
 
 def run_one(name: str, model: str, n: int, strain: float, steps: int, element: float | None) -> xr.Dataset:
     """Relax and pull one model; the curve with its status, CPU and relaxed spacings."""
-    changes = {"parameters.yarn_model.filaments": n, "parameters.yarn_model.model": model}
-    if element is not None:
-        changes["resolution.element_length"] = element
-    cell = homtex.load_cell(name).replace(**changes)
+    relaxed, relax_cpu = relaxed_yarn_model(name, model, n, element)
     t0 = time.process_time()
-    relaxed = homtex.relax(cell)
-    relax_cpu = time.process_time() - t0
     ds = homtex.tensile(relaxed, strain=strain, direction="wale", steps=steps, progress=True)
-    cpu = time.process_time() - t0
+    cpu = relax_cpu + time.process_time() - t0
     work = ds.external_work.values
     share = np.divide(ds.stabilization_energy.values, work, out=np.zeros_like(work), where=work > 0)
     out = ds[["force_per_width", "energy_balance", "newton_iterations", "max_filament_stress"]]
