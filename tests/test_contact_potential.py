@@ -354,6 +354,36 @@ def test_thin_filaments_crossing_nearly_parallel_see_the_barrier(deg):
         assert E_global < 0.01 * E            # a 300th
 
 
+def test_a_bundles_contact_pushes_a_closing_crossing_apart_with_the_barriers_force():
+    """Two filaments (r = 8.5 um, 0.2 mm elements) crossing at 0.45 deg, 1e-3 ghat apart at the
+    crossing. With the default parallel_sagitta (0.3) the pair is in the nodal form, which looks at
+    the ends, 0.21 ghat apart: it pushes with about 4 |b'(0.21 ghat)| (22 kappa ghat), whatever the
+    crossing's gap, so a line load above that closes the crossing against the collision check and
+    Newton stalls (a 3-filament jersey at its lock-up). A yarn of filaments in a knit gets
+    FILAMENT_SAGITTA (0.01): the pair is in the crossing form and pushes with exactly the barrier's
+    force at the crossing's gap, -b'(1e-3 ghat) (about 1000 kappa ghat)."""
+    from homtex.knits.relax import FILAMENT_SAGITTA, knit_contact
+
+    L, r, ghat, kappa = 0.2, 0.0085, 8.5e-5, 1.0
+    th, g = np.radians(0.45), 1e-3 * ghat
+    u = np.array([np.cos(th), np.sin(th), 0.0])
+    up = np.array([0.0, 0.0, 2 * r + g])
+    x = np.array([[-L / 2, 0, 0], [L / 2, 0, 0], -L / 2 * u + up, L / 2 * u + up])
+    st = pair_stencil([[0, 1], [2, 3]], np.full(2, r), [0], [1], length=np.full(2, L))
+    push = {}
+    for s in (0.3, FILAMENT_SAGITTA):
+        ce = pair_potential(x, st, Enforcement("barrier", ghat=ghat, kappa=kappa, parallel_sagitta=s), hessian=False)
+        push[s] = -float(ce.grad[2:4, 2].sum())          # z force on the upper filament, N
+    exact = -float(Enforcement("barrier", ghat=ghat, kappa=kappa).energy(g)[1])
+    assert push[FILAMENT_SAGITTA] == pytest.approx(exact, rel=1e-6)
+    assert exact > 900 * kappa * ghat
+    assert 0 < push[0.3] < 30 * kappa * ghat
+    info = {"yarn_model": {"model": "filaments", "filaments": 3}, "compression": None}
+    assert knit_contact(info, 0.0).parallel_sagitta == FILAMENT_SAGITTA
+    info["yarn_model"]["model"] = "equivalent"
+    assert knit_contact(info, 0.0).parallel_sagitta == homtex.Contact().parallel_sagitta == 0.3
+
+
 def test_per_pair_blend_angles_stay_global_for_short_elements():
     """Elements a few radii long (every shipped equivalent-yarn cell): the per-pair angles are the
     global ones, so those models are unchanged."""

@@ -72,9 +72,10 @@ class SystemMixin:
             h = comp.shell
         ghat = contact.barrier_gap * float(r.min() - h)
         kappa = contact.barrier_stiffness or float(np.mean(frame.EA / frame.length))
-        enf = plate_enf = Enforcement("barrier", ghat=ghat, kappa=kappa)
+        sag = contact.parallel_sagitta
+        enf = plate_enf = Enforcement("barrier", ghat=ghat, kappa=kappa, parallel_sagitta=sag)
         if comp is not None:
-            enf = Enforcement("shell", ghat=ghat, kappa=kappa, **comp.pair_params())
+            enf = Enforcement("shell", ghat=ghat, kappa=kappa, parallel_sagitta=sag, **comp.pair_params())
             plate_enf = Enforcement("shell", ghat=ghat, kappa=kappa, **comp.plate_params())
         eps_v = contact.friction_slip if contact.friction_slip is not None else 1e-3 * float(r.min())
         self.ghat, self.kappa, self.eps_v = ghat, kappa, eps_v

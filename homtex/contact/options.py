@@ -73,6 +73,13 @@ class Contact:
         and the contact surfaces are found to within that distance).
     barrier_stiffness : barrier stiffness kappa, N/mm (default: the mean axial stiffness EA / L
         of the elements).
+    parallel_sagitta : the largest error of the nodal (line-contact) form that near-parallel yarn
+        pairs use, where two elements cross at a small angle, as a share of ghat (default 0.3;
+        :class:`~homtex.contact.potential.Enforcement`): the blend angles of a pair of long elements
+        are lowered until their ends are at most this much farther apart than the crossing. The
+        barrier can push such a crossing apart with at most about kappa ghat / parallel_sagitta;
+        a larger line load closes it against the collision check and Newton stalls (a bundle of
+        filaments at a knit's lock-up: docs/contact.md).
     friction_slip : slip (mm) per step at which the smoothed Coulomb friction saturates (eps_v;
         below it a contact sticks elastically). Default: 1e-3 x the thinnest contact radius (1e-4 mm
         for 0.1 mm yarns): steps that slide a contact by less than eps_v see a friction force below
@@ -107,6 +114,7 @@ class Contact:
     plate_friction: float | None = None
     barrier_gap: float = 0.01
     barrier_stiffness: float | None = None
+    parallel_sagitta: float = 0.3
     friction_slip: float | None = None
     compression: YarnCompression | None = None
 
@@ -196,6 +204,7 @@ _CHECKS = {
     **{name: _optional(_num(name, ge=0.0, le=MAX_FRICTION)) for name in ("friction", "plate_friction")},
     "barrier_gap": _num("barrier_gap", " (relative to the smallest contact radius)", gt=0.0, le=0.5),
     "barrier_stiffness": _optional(_num("barrier_stiffness", " (N/mm)", gt=0.0, le=1e12)),
+    "parallel_sagitta": _num("parallel_sagitta", " (a share of the barrier gap)", gt=0.0, le=1.0),
     "friction_slip": _optional(_num("friction_slip", " (mm)", gt=0.0, le=1.0)),
     "compression": _compression,
 }

@@ -16,7 +16,7 @@ from ..errors import SolverError
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
 from ..output.datasets import curve_dataset
 from ..output.progress import Progress
-from .relax import FILAMENT_PATTERN_REACH
+from .relax import FILAMENT_PATTERN_REACH, is_filament_bundle
 
 __all__ = ["META", "filament_stresses", "finish", "settings"]
 
@@ -100,7 +100,7 @@ def settings(info, tol: float, **kw) -> NonlinearSettings:
     # 1000 it reaches 12 %, where the loops lock up (docs/knits.md)
     iters = 1000 if info["yarn_model"]["model"] == "filaments" else 200
     kw.setdefault("max_iter", 5000 if kw.get("stabilization") == "released" else iters)
-    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+    if is_filament_bundle(info):
         kw.setdefault("pattern_reach", FILAMENT_PATTERN_REACH)
     return NonlinearSettings(tol=tol, **kw)
 
@@ -114,7 +114,7 @@ def stepping(info, friction: bool) -> dict:
     each level is kept once it converges and the energy its snaps release goes to the ledger, which
     flags the curve past 1 % of the work (docs/knits.md)."""
     kw = {"max_cuts": 10, "refine": 0.003, **(FRICTION_STEPPING if friction else PATH_STEPPING)}
-    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+    if is_filament_bundle(info):
         kw["max_refine"] = 0
     return kw
 

@@ -58,6 +58,12 @@ PAPER_NEEDLES = 5
 #: NonlinearSettings.pattern_reach of a yarn of filaments: they settle into new contacts at nearly
 #: every Newton iteration (the 20-filament rib: 589 pattern rebuilds in 700 iterations, 183 with 3)
 FILAMENT_PATTERN_REACH = 3.0
+#: Contact.parallel_sagitta of a yarn of filaments: two filaments of a bundle that cross at a small
+#: angle are held apart by at most about kappa ghat / parallel_sagitta where the nodal form looks at
+#: their elements' ends; at the lock-up the loops press them together harder than the default 0.3
+#: allows and Newton stalls at the collision check (the 3-filament jersey at 14 %, the 20-filament
+#: rib at 38 %); 0.02 and 0.005 give the same curve within 0.02 % (docs/knits.md)
+FILAMENT_SAGITTA = 0.01
 
 
 @dataclass
@@ -170,21 +176,19 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
     lat = Lattice(free=((0, 0), (1, 0), (1, 1)), force={(1, 1): force} if force > 0 else {})
     settings = NonlinearSettings(stabilization="released", max_iter=check_int(max_iter, "max_iter", ge=1),
                                  tol=check_number(tol, "tol", gt=0.0, lt=1.0))
-    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+    if is_filament_bundle(info):
         settings.pattern_reach = FILAMENT_PATTERN_REACH
     # frictionless release (dry friction would freeze an arbitrary intermediate of the generated
     # geometry), then the state settles with the cell's friction (its contacts stick where they are)
     start, axis, rest0 = None, {}, info["rest"]
-    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+    if is_filament_bundle(info):
         start, rest0, axis = _axis_start(cell, frame, info, lat, settings)
     info = dict(info, rest=rest0)
-    sol = _release(cell, frame, info, lat, settings, Contact(friction=0.0, compression=info["compression"]), start,
-                   restart=start is not None)
+    sol = _release(cell, frame, info, lat, settings, knit_contact(info, 0.0), start, restart=start is not None)
     iters = sol.info.iterations + axis.get("axis_newton_iterations", 0)
     stable = bool(sol.info.negative_eigenvalues == 0)
     if mu > 0:
-        sol = _release(cell, frame, info, lat, settings, Contact(friction=mu, compression=info["compression"]),
-                       sol.export_state())
+        sol = _release(cell, frame, info, lat, settings, knit_contact(info, mu), sol.export_state())
         iters += sol.info.iterations
     x, Q, P = sol.positions.copy(), sol.cor.Q.copy(), sol.lat.periods.copy()
     energy = float(sol.cor.energy.sum())
@@ -221,6 +225,19 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
              after["course_spacing"], attrs["newton_iterations"], attrs["cpu_seconds"])
     return RelaxedCell(cell=cell, frame=new, rest=rest, state=sol.export_state(), attrs=attrs,
                        cell_rest=None if start is None else rest0)
+
+
+def knit_contact(info, friction: float | None) -> Contact:
+    """Contact options of a knit cell's engine runs: the cell's compressible shells, Coulomb
+    ``friction`` and, for a yarn of filaments, the nodal form's crossing error cut to
+    :data:`FILAMENT_SAGITTA`."""
+    sag = FILAMENT_SAGITTA if is_filament_bundle(info) else Contact.parallel_sagitta
+    return Contact(friction=friction, compression=info["compression"], parallel_sagitta=sag)
+
+
+def is_filament_bundle(info) -> bool:
+    """The cell's yarn is a bundle of more than one filament."""
+    return info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1
 
 
 def _axis_start(cell, frame, info, lat, settings) -> tuple:

@@ -28,11 +28,11 @@ import numpy as np
 from ..contact.engine import EngineStepper
 from ..contact.incremental import IncrementalSolver
 from ..contact.ipc_system import serial_numba
-from ..contact.options import Contact
 from ..errors import InputError, SolverError
 from ..model.frame import Frame
 from ..model.rest import RestState, start_rest
 from .record import _attrs, _positions, _Recorder, finish, march, settings, stepping
+from .relax import is_filament_bundle, knit_contact
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,7 @@ def build_specimen(relaxed, info, wales: int, courses: int, element_length: floa
     P = relaxed.frame.periods
     N = pat.n_needles * info["repeat"][0]
     C = pat.n_courses * info["repeat"][1]
-    if info["yarn_model"]["model"] == "filaments" and info["yarn_model"]["filaments"] > 1:
+    if is_filament_bundle(info):
         raise InputError("a finite specimen of separate filaments is not built; use the equivalent yarn "
                          "(yarn_model.model = 'equivalent') for specimens")
     nodes, els, src, ends = [], [], [], []
@@ -130,11 +130,11 @@ def specimen_test(relaxed, info, wales, courses, strain, v, steps, mu, progress,
     h = float(np.median(relaxed.cell.frame.length))
     spec, rest, bottom, top, width0 = build_specimen(relaxed, info, wales, courses, h)
     L0 = float(spec.nodes[top, 1].mean() - spec.nodes[bottom, 1].mean())
-    contact = Contact(friction=mu, compression=info["compression"])
+    contact = knit_contact(info, mu)
     fixed = {int(i): "all" for i in bottom}
     fixed.update({int(i): {0: 0.0, 1: strain * L0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 0.0} for i in top})
     # 1. the cut edges let go with the grips held (energy released, the relaxation's ledger)
-    rel = IncrementalSolver(spec, fixed, None, [], Contact(compression=info["compression"]), rest=rest,
+    rel = IncrementalSolver(spec, fixed, None, [], knit_contact(info, None), rest=rest,
                             settings=settings(info, tol, stabilization="released"))
     with serial_numba(rel.small):
         try:

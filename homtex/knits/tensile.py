@@ -36,11 +36,10 @@ from ..contact.engine import EngineStepper
 from ..contact.incremental import IncrementalSolver
 from ..contact.ipc_system import serial_numba
 from ..contact.lattice import Lattice
-from ..contact.options import Contact
 from ..errors import InputError, SolverError
 from ..validate import check_choice, check_int, check_number
 from .record import _attrs, _positions, _Recorder, finish, march, settings, stepping
-from .relax import RelaxedCell, cell_friction, knit_info, relax
+from .relax import RelaxedCell, cell_friction, knit_contact, knit_info, relax
 
 log = logging.getLogger(__name__)
 
@@ -97,7 +96,7 @@ def _cell_test(relaxed: RelaxedCell, info, strain, v, steps, mu, progress, keep_
     w = 1 - v
     free = [(0, 0), (1, 0), (1, 1)]
     free.remove((v, v))
-    contact = Contact(friction=mu, compression=info["compression"])
+    contact = knit_contact(info, mu)
     # pulled along the wales, the stretch carries the relaxation's take-down (the force starts at
     # it); pulled along the courses, the wales carry no force: the take-down is let go first, the
     # courses held at their relaxed length (the energy that releases is counted in the attrs)
