@@ -52,7 +52,8 @@ def _cases():
         "Contact": (lambda **k: homtex.Contact(**k), ["strategy", "enforcement", "penalty", "removal_fraction",
                                                      "margin", "exclude_hops", "gap_tol", "max_penetration",
                                                      "max_iter", "friction", "initial_overlap", "plate_friction",
-                                                     "barrier_gap", "barrier_stiffness", "friction_slip"]),
+                                                     "barrier_gap", "barrier_stiffness", "friction_slip",
+                                                     "parallel_sagitta"]),
         "Plate": (lambda **k: homtex.Plate(**({"z": 0.0} | k)), ["z", "normal", "displacement", "force",
                                                                  "pressure", "area"]),
         "set_options": (lambda **k: homtex.set_options(**k), ["static_solver", "tol", "threads", "progress",
@@ -98,7 +99,8 @@ def test_every_bad_argument_is_refused_by_name_or_valid():
 # ------------------------------------------------------------------ options changed after construction
 @pytest.mark.parametrize("name, value", [("friction", -5), ("friction", math.nan), ("plate_friction", 11.0),
                                          ("strategy", "magic"), ("max_iter", 2.5), ("penalty", -1.0),
-                                         ("reuse_amg", 1), ("barrier_gap", 0.9), ("fricton", 0.2)])
+                                         ("reuse_amg", 1), ("barrier_gap", 0.9), ("parallel_sagitta", 0.0),
+                                         ("fricton", 0.2)])
 def test_contact_options_are_checked_on_assignment(name, value):
     """``c = Contact(); c.friction = -5`` ran frictionless with status "ok": every assignment is
     checked like the constructor's argument (and a misspelt option is refused, not added)."""
