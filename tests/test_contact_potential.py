@@ -18,6 +18,7 @@ from homtex.contact.plates import plate_potential
 from homtex.contact.potential import Enforcement, assemble_blocks, pair_potential
 from homtex.contact.stencil import frame_stencil, pair_stencil
 from homtex.errors import InputError
+from homtex.knits.relax import FILAMENT_SAGITTA, knit_contact
 from homtex.model.exclusions import arc_exclusions
 
 ipctk = pytest.importorskip("ipctk")
@@ -362,8 +363,6 @@ def test_a_bundles_contact_pushes_a_closing_crossing_apart_with_the_barriers_for
     Newton stalls (a 3-filament jersey at its lock-up). A yarn of filaments in a knit gets
     FILAMENT_SAGITTA (0.01): the pair is in the crossing form and pushes with exactly the barrier's
     force at the crossing's gap, -b'(1e-3 ghat) (about 1000 kappa ghat)."""
-    from homtex.knits.relax import FILAMENT_SAGITTA, knit_contact
-
     L, r, ghat, kappa = 0.2, 0.0085, 8.5e-5, 1.0
     th, g = np.radians(0.45), 1e-3 * ghat
     u = np.array([np.cos(th), np.sin(th), 0.0])
