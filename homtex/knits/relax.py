@@ -176,12 +176,11 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
     lat = Lattice(free=((0, 0), (1, 0), (1, 1)), force={(1, 1): force} if force > 0 else {})
     settings = NonlinearSettings(stabilization="released", max_iter=check_int(max_iter, "max_iter", ge=1),
                                  tol=check_number(tol, "tol", gt=0.0, lt=1.0))
-    if is_filament_bundle(info):
-        settings.pattern_reach = FILAMENT_PATTERN_REACH
     # frictionless release (dry friction would freeze an arbitrary intermediate of the generated
     # geometry), then the state settles with the cell's friction (its contacts stick where they are)
     start, axis, rest0 = None, {}, info["rest"]
     if is_filament_bundle(info):
+        settings.pattern_reach = FILAMENT_PATTERN_REACH
         start, rest0, axis = _axis_start(cell, frame, info, lat, settings)
     info = dict(info, rest=rest0)
     sol = _release(cell, frame, info, lat, settings, knit_contact(info, 0.0), start, restart=start is not None)
