@@ -1,5 +1,5 @@
-"""The result cache: cell computations that the macro layer and the seam functions reuse
-(compression laws, sewn cushion profiles), kept in memory and on disk.
+"""The result cache: cell computations that the macro layer, the seam functions and the knit
+tests reuse (compression laws, sewn cushion profiles, relaxed knit cells), kept in memory and on disk.
 
 A result is found again by its key, a SHA-256 hash of what determines it: the kind of
 computation, the cell's content (its data as read from the file, with any replacements; not its

@@ -202,6 +202,36 @@ def test_a_1x1_rib_pulls_its_wales_together():
     assert a["loop_length_mm"] == pytest.approx(a["input_loop_length_mm"], rel=1e-3)
 
 
+def test_a_relaxed_cell_comes_back_from_the_result_cache_and_continues_as_computed(tmp_path, monkeypatch):
+    """A relaxed cell is kept in the result cache (memory and disk, keyed by the cell's content and
+    the arguments): read back from disk in a fresh process (memory cleared) it is the computed state
+    bit for bit, the pairs touching at creation and the filaments' laid rest state included, and a
+    tensile test from it gives the computed one's forces exactly; another take-down is another
+    key. A 3-filament jersey, so the laid rest state is stored too."""
+    from homtex import cache
+
+    monkeypatch.setenv("HOMTEX_CACHE_DIR", str(tmp_path))
+    cell = homtex.load_cell("cells/jersey_eglass.toml").replace(**{
+        "resolution.element_length": 0.65, "parameters.yarn_model.model": "filaments",
+        "parameters.yarn_model.filaments": 3})
+    a = homtex.relax(cell)
+    cache.clear_cache(disk=False)
+    b = homtex.relax(cell)
+    assert not a.attrs["from_cache"] and b.attrs["from_cache"] and a.cell_rest is not None
+    for k in ("ut", "Q", "periods", "loads"):
+        assert np.array_equal(getattr(a.state, k), getattr(b.state, k)), k
+    assert all(np.array_equal(x, y) for x, y in zip(a.state.touch, b.state.touch)) and len(a.state.touch[0])
+    assert a.state.ledger == b.state.ledger
+    assert np.array_equal(a.cell_rest.frames, b.cell_rest.frames) and np.array_equal(a.rest.frames, b.rest.frames)
+    assert np.array_equal(a.frame.nodes, b.frame.nodes) and np.array_equal(a.frame.periods, b.frame.periods)
+    assert a.attrs.keys() == b.attrs.keys()
+    same = [a.attrs[k] == b.attrs[k] or (a.attrs[k] != a.attrs[k] and b.attrs[k] != b.attrs[k]) for k in a.attrs]
+    assert sum(same) == len(a.attrs) - 1          # all but from_cache (NaN for NaN)
+    fa, fb = (homtex.tensile(r, strain=0.04, direction="wale", steps=2).force.values for r in (a, b))
+    assert np.array_equal(fa, fb) and fa[-1] > fa[0]
+    assert not homtex.relax(cell, take_down=0.05).attrs["from_cache"]
+
+
 # ------------------------------------------------------------------------------ tensile
 @pytest.fixture(scope="module")
 def wale(jersey):
@@ -332,7 +362,7 @@ def test_a_rebuilt_pattern_that_takes_near_pairs_along_changes_the_path_only_by_
     for reach in (0.0, relax_module.FILAMENT_PATTERN_REACH):
         monkeypatch.setattr(relax_module, "FILAMENT_PATTERN_REACH", reach)
         built.clear()
-        r = homtex.relax(cell)
+        r = homtex.relax(cell, cache=False)
         out[reach] = (r.attrs, len(built))
     (a0, n0), (a1, n1) = out.values()
     assert n1 < 0.8 * n0

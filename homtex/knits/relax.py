@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..cache import cached
 from ..contact.incremental import IncrementalSolver, NonlinearSettings
 from ..contact.ipc_system import serial_numba
 from ..contact.lattice import Lattice
@@ -48,6 +49,7 @@ from ..geometry.knit_cell import bundle_axis, creation_overlaps, lay_bundles
 from ..model.frame import Frame
 from ..model.rest import RestState, straight_rest
 from ..validate import check_int, check_number
+from .stored import relaxed_dataset, relaxed_from_dataset
 
 log = logging.getLogger(__name__)
 
@@ -151,7 +153,8 @@ def loop_measures(frame: Frame, x: np.ndarray, periods: np.ndarray, info: dict) 
             "loop_height": float(np.mean(hts)), "loop_width": float(np.mean(wds))}
 
 
-def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000, tol: float = 1e-8) -> RelaxedCell:
+def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000, tol: float = 1e-8,
+          cache: bool = True) -> RelaxedCell:
     """Relax a weft-knit cell (see the module docstring).
 
     Parameters
@@ -162,6 +165,10 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
         per 5 needles of the cell along the wales.
     max_iter : Newton iterations of the relaxation (it takes the generated loops far).
     tol : equilibrium tolerance, relative to the forces.
+    cache : take the relaxed cell from the result cache (:mod:`homtex.cache`) where the same cell
+        content was relaxed with the same arguments by the same homtex version, and store it there
+        (False: always compute). ``attrs["cpu_seconds"]`` is the CPU of the computation that made it,
+        ``attrs["from_cache"]`` says whether this call took it from the cache.
 
     Returns a :class:`RelaxedCell`; SolverError if the relaxation fails at every step size.
     """
@@ -170,12 +177,32 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
     info = knit_info(cell)
     take_down = check_number(take_down, "take_down (N)", ge=0.0, le=1e6)
     mu = cell_friction(cell, friction)
+    max_iter = check_int(max_iter, "max_iter", ge=1)
+    tol = check_number(tol, "tol", gt=0.0, lt=1.0)
+    if not cache:
+        return _relax(cell, info, mu, take_down, max_iter, tol)
+    box = {}
+
+    def compute():
+        box["relaxed"] = _relax(cell, info, mu, take_down, max_iter, tol)
+        return relaxed_dataset(box["relaxed"])
+
+    # the module's bundle settings are part of what determines the result
+    params = {"friction": mu, "take_down": take_down, "max_iter": max_iter, "tol": tol,
+              "filament_sagitta": FILAMENT_SAGITTA, "filament_pattern_reach": FILAMENT_PATTERN_REACH}
+    ds = cached("relaxed", cell, params, compute)
+    out = box["relaxed"] if "relaxed" in box else relaxed_from_dataset(cell, ds, RelaxedCell)
+    out.attrs["from_cache"] = "relaxed" not in box
+    return out
+
+
+def _relax(cell, info, mu: float, take_down: float, max_iter: int, tol: float) -> RelaxedCell:
+    """The relaxation of :func:`relax` (arguments checked)."""
     t0 = time.process_time()
     frame = cell.frame
     force = take_down * info["needles"] / PAPER_NEEDLES
     lat = Lattice(free=((0, 0), (1, 0), (1, 1)), force={(1, 1): force} if force > 0 else {})
-    settings = NonlinearSettings(stabilization="released", max_iter=check_int(max_iter, "max_iter", ge=1),
-                                 tol=check_number(tol, "tol", gt=0.0, lt=1.0))
+    settings = NonlinearSettings(stabilization="released", max_iter=max_iter, tol=tol)
     # frictionless release (dry friction would freeze an arbitrary intermediate of the generated
     # geometry), then the state settles with the cell's friction (its contacts stick where they are)
     start, axis, rest0 = None, {}, info["rest"]

@@ -167,7 +167,7 @@ def instrumented(form: str, split: np.ndarray, max_refine: int | None = None):
 
 def acrylic(element_length: float, strain: float, steps: int, max_refine: int | None = None) -> xr.Dataset:
     cell = homtex.load_cell("rib_1x1_acrylic").replace(**{"resolution.element_length": element_length})
-    relaxed = homtex.relax(cell, friction=0.0)
+    relaxed = homtex.relax(cell, friction=0.0, cache=False)
     runs = []
     for form in FORMS:
         split = np.zeros(3)
