@@ -364,8 +364,13 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
         lag = [lg for lg in lag if lg is not None]
         r_prev = None
         hist, moves = [], []
+        since = 0               # iterations since the exact Hessian was last found indefinite
         for it in range(1, s.max_iter + 1):
-            ev = self._evaluate(x_start, lag, hessian=True)
+            # while the exact Hessian keeps being indefinite, go straight to the projected one and
+            # try the exact one again every exact_retry iterations: the 20-filament rib's exact
+            # Hessians were indefinite at 78 % of its iterations, each a factorisation thrown away
+            project = 0 < since < s.exact_retry
+            ev = self._evaluate(x_start, lag, hessian=True, project=project)
             rem = self._remaining(target_u, target_z)
             g = ev["g"].ravel()
             rn = float(np.linalg.norm(g[self.free]))
@@ -398,13 +403,20 @@ class IncrementalSolver(SystemMixin, LatticeMixin):
             # stick stiffness at eps_v would hold every contact, and most of them slide over the step
             eps_h = self.s.predictor_slip * float(np.abs(rem[:, :3]).max(initial=0.0)) if presc else 0.0
             if eps_h > self.eps_v and self.scene.has_friction:
-                ev = self._evaluate(x_start, lag, hessian=True, eps_hessian=eps_h)
+                ev = self._evaluate(x_start, lag, hessian=True, project=project, eps_hessian=eps_h)
             self._assemble(ev)
-            if not self._factor(it, shrink=False):
+            if project:
+                self._factor(it)
+                info.projected += 1
+                since += 1
+            elif not self._factor(it, shrink=False):
                 ev = self._evaluate(x_start, lag, hessian=True, project=True, eps_hessian=eps_h)
                 self._assemble(ev)
                 self._factor(it)
                 info.projected += 1
+                since = 1
+            else:
+                since = 0
             rhs = -g
             if presc:
                 rhs = rhs - self._hess_times(ev, rem).ravel()

@@ -38,6 +38,11 @@ class NonlinearSettings:
     appear at nearly every iteration (20 filaments per yarn settling on each other: 589 rebuilds
     in 700 Newton iterations, each a new ordering and symbolic factor) 3 cut the rebuilds to 183
     and the CPU by a fifth, more couples too much (30: 33 rebuilds, a denser factor, 14 % slower).
+    exact_retry : after an iteration whose exact Hessian was indefinite (its contact blocks then
+    projected to PSD), the next exact_retry - 1 iterations take the projected one at once, the
+    exact one being tried again after them (1: every iteration tries the exact one first). Where
+    the exact Hessian stays indefinite over many iterations (a bundle of filaments: 78 % of the
+    20-filament rib's iterations), each try costs a factorisation thrown away.
     """
 
     tol: float = 1e-8
@@ -53,6 +58,7 @@ class NonlinearSettings:
     predictor_slip: float = 0.1
     stabilization: str = "damping"
     pattern_reach: float = 0.0
+    exact_retry: int = 1
 
 
 @dataclass

@@ -16,7 +16,7 @@ from ..errors import SolverError
 from ..model.results import ENERGY_KEYS, ENERGY_LONG_NAMES, Status, set_status
 from ..output.datasets import curve_dataset
 from ..output.progress import Progress
-from .relax import FILAMENT_PATTERN_REACH, is_filament_bundle
+from .relax import FILAMENT_EXACT_RETRY, FILAMENT_PATTERN_REACH, is_filament_bundle
 
 __all__ = ["META", "filament_stresses", "finish", "settings"]
 
@@ -102,6 +102,7 @@ def settings(info, tol: float, **kw) -> NonlinearSettings:
     kw.setdefault("max_iter", 5000 if kw.get("stabilization") == "released" else iters)
     if is_filament_bundle(info):
         kw.setdefault("pattern_reach", FILAMENT_PATTERN_REACH)
+        kw.setdefault("exact_retry", FILAMENT_EXACT_RETRY)
     return NonlinearSettings(tol=tol, **kw)
 
 

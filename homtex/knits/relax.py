@@ -60,6 +60,11 @@ PAPER_NEEDLES = 5
 #: NonlinearSettings.pattern_reach of a yarn of filaments: they settle into new contacts at nearly
 #: every Newton iteration (the 20-filament rib: 589 pattern rebuilds in 700 iterations, 183 with 3)
 FILAMENT_PATTERN_REACH = 3.0
+#: NonlinearSettings.exact_retry of a yarn of filaments under test: a bundle's exact Hessian stays
+#: indefinite over most iterations (filaments buckling on each other), so trying it first at each
+#: wasted a factorisation (1.86 -> 1.12 per Newton iteration). Tests only: the relaxation gains
+#: nothing by it and would settle in another state of its soft set (docs/knits.md)
+FILAMENT_EXACT_RETRY = 8
 #: Contact.parallel_sagitta of a yarn of filaments: two filaments of a bundle that cross at a small
 #: angle are held apart by at most about kappa ghat / parallel_sagitta where the nodal form looks at
 #: their elements' ends; at the lock-up the loops press them together harder than the default 0.3
