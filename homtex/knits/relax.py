@@ -90,6 +90,18 @@ class RelaxedCell:
     attrs: dict = field(default_factory=dict)
     cell_rest: object = None
 
+    @classmethod
+    def from_state(cls, cell, state, attrs: dict, cell_rest=None) -> "RelaxedCell":
+        """The relaxed cell of ``cell`` at the engine ``state`` (on the cell's own frame, the rest
+        state ``cell_rest`` or the cell's): its frame at the state's positions and lattice, the rest
+        state seen from there."""
+        frame = cell.frame
+        base = cell.info["rest"] if cell_rest is None else cell_rest
+        new = Frame(frame.nodes + state.ut, frame.elements, periods=state.periods.copy(), images=frame.images,
+                    **frame.element_fields())
+        return cls(cell=cell, frame=new, rest=base.moved(state.Q, frame.elements), state=state, attrs=attrs,
+                   cell_rest=cell_rest)
+
     @property
     def rest_on_cell(self):
         """The yarns' rest state on the cell's own frame (:attr:`cell_rest`, else the cell's)."""
@@ -196,7 +208,7 @@ def relax(cell, *, friction=None, take_down: float = 0.06, max_iter: int = 5000,
     params = {"friction": mu, "take_down": take_down, "max_iter": max_iter, "tol": tol,
               "filament_sagitta": FILAMENT_SAGITTA, "filament_pattern_reach": FILAMENT_PATTERN_REACH}
     ds = cached("relaxed", cell, params, compute)
-    out = box["relaxed"] if "relaxed" in box else relaxed_from_dataset(cell, ds, RelaxedCell)
+    out = box["relaxed"] if "relaxed" in box else RelaxedCell.from_state(cell, *relaxed_from_dataset(cell, ds))
     out.attrs["from_cache"] = "relaxed" not in box
     return out
 
@@ -221,14 +233,12 @@ def _relax(cell, info, mu: float, take_down: float, max_iter: int, tol: float) -
     if mu > 0:
         sol = _release(cell, frame, info, lat, settings, knit_contact(info, mu), sol.export_state())
         iters += sol.info.iterations
-    x, Q, P = sol.positions.copy(), sol.cor.Q.copy(), sol.lat.periods.copy()
+    x, P = sol.positions.copy(), sol.lat.periods.copy()
     energy = float(sol.cor.energy.sum())
     before = loop_measures(frame, frame.nodes, frame.periods, info)
     x0 = frame.nodes if start is None else frame.nodes + start.ut
     begun = loop_measures(frame, x0, frame.periods if start is None else start.periods, info)
     after = loop_measures(frame, x, P, info)
-    new = Frame(x, frame.elements, periods=P, images=frame.images, **frame.element_fields())
-    rest = info["rest"].moved(Q, frame.elements)
     attrs = {f"relaxed_{k}_mm": v for k, v in after.items()}
     attrs.update({f"generated_{k}_mm": v for k, v in before.items()})
     attrs.update({f"start_{k}_mm": v for k, v in begun.items()})
@@ -254,8 +264,7 @@ def _relax(cell, info, mu: float, take_down: float, max_iter: int, tol: float) -
     log.info("relax %s: loop length %.4g mm (input %.4g), wale spacing %.4g mm, course spacing %.4g mm, %d Newton "
              "iterations, %.1f s CPU", cell.name, after["loop_length"], info["loop_length"], after["wale_spacing"],
              after["course_spacing"], attrs["newton_iterations"], attrs["cpu_seconds"])
-    return RelaxedCell(cell=cell, frame=new, rest=rest, state=sol.export_state(), attrs=attrs,
-                       cell_rest=None if start is None else rest0)
+    return RelaxedCell.from_state(cell, sol.export_state(), attrs, None if start is None else rest0)
 
 
 def knit_contact(info, friction: float | None) -> Contact:

@@ -3,8 +3,9 @@
 
 The engine state (translations, rotations, lattice, the pairs touching at creation, the energy
 ledger), the rest state a yarn of filaments was laid with, and the attrs are stored; the frame and
-the rest state seen from the relaxed shape follow from them and the cell exactly as ``relax``
-builds them, so a stored relaxed cell continues into ``tensile`` as the computed one does.
+the rest state seen from the relaxed shape follow from them and the cell
+(``RelaxedCell.from_state``, as ``relax`` builds them), so a stored relaxed cell continues into
+``tensile`` as the computed one does.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import xarray as xr
 
 from ..contact.step_data import EngineState
 from ..errors import InputError
-from ..model.frame import Frame
 from ..model.rest import RestState
 
 __all__ = ["relaxed_dataset", "relaxed_from_dataset"]
@@ -48,24 +48,25 @@ def relaxed_dataset(rc) -> xr.Dataset:
     return xr.Dataset(v, attrs=attrs)
 
 
-def relaxed_from_dataset(cell, ds: xr.Dataset, relaxed_cell):
-    """The ``relaxed_cell`` (the RelaxedCell class) stored by :func:`relaxed_dataset` for ``cell``."""
+def relaxed_from_dataset(cell, ds: xr.Dataset) -> tuple:
+    """(EngineState, attrs, the laid rest state or None) stored by :func:`relaxed_dataset` for
+    ``cell`` (``RelaxedCell.from_state`` makes the relaxed cell of them)."""
     frame = cell.frame
     ut = np.ascontiguousarray(ds["ut"].values, dtype=float)
     if ut.shape != (frame.n_nodes, 3):
         raise InputError(f"a stored relaxed state of {ut.shape[0]} nodes does not belong to {cell.name!r} "
                          f"({frame.n_nodes} nodes); clear the result cache (homtex.clear_cache())")
-    Q = np.ascontiguousarray(ds["Q"].values, dtype=float)
-    P = np.ascontiguousarray(ds["periods"].values, dtype=float)
     a = dict(ds.attrs)
     ledger = {k[len(_LEDGER):]: float(a.pop(k)) for k in list(a) if k.startswith(_LEDGER)}
-    state = EngineState(n_nodes=frame.n_nodes, n_elements=frame.n_elements, ut=ut, Q=Q,
+    state = EngineState(n_nodes=frame.n_nodes, n_elements=frame.n_elements, ut=ut,
+                        Q=np.ascontiguousarray(ds["Q"].values, dtype=float),
                         prestrain_scale=float(a.pop("prestrain_scale")),
                         loads=np.ascontiguousarray(ds["loads"].values, dtype=float), plate_z=np.zeros(0),
                         plate_normal=np.zeros(0), plate_force=np.zeros(0),
                         touch=(ds["touch_keys"].values.astype(np.int64), ds["touch_rsum"].values.astype(float),
                                ds["touch_gap"].values.astype(float)),
-                        ledger=ledger, delta=float(a.pop("pseudo_time_step")), periods=P)
+                        ledger=ledger, delta=float(a.pop("pseudo_time_step")),
+                        periods=np.ascontiguousarray(ds["periods"].values, dtype=float))
     for k in ("cache_key", "cache_kind"):
         a.pop(k, None)
     attrs = dict((k[len(_FLAG):], bool(w)) if k.startswith(_FLAG) else (k, w.item() if isinstance(w, np.generic) else w)
@@ -74,7 +75,4 @@ def relaxed_from_dataset(cell, ds: xr.Dataset, relaxed_cell):
     if "rest_length" in ds:
         cell_rest = RestState(length=np.ascontiguousarray(ds["rest_length"].values, dtype=float),
                               frames=np.ascontiguousarray(ds["rest_frames"].values, dtype=float))
-    base = cell.info["rest"] if cell_rest is None else cell_rest
-    new = Frame(frame.nodes + ut, frame.elements, periods=P, images=frame.images, **frame.element_fields())
-    return relaxed_cell(cell=cell, frame=new, rest=base.moved(Q, frame.elements), state=state, attrs=attrs,
-                        cell_rest=cell_rest)
+    return state, attrs, cell_rest
